@@ -1,0 +1,483 @@
+"""Numpy agent for task expansion: MLPs with hand-written backward passes, a per-block set
+network, the factorised action distribution, behaviour cloning, PPO and GAE.  (~450 lines)
+
+Paper: "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu).
+Sec 3: a goal-conditioned policy pi(a | s, g) and value V(s, g) over a set of blocks; an action
+picks a block and a discrete target (x-bin, layer) for it.  Sec 4.1/4.3: behaviour cloning on
+demonstrations (base skills, self-distillation); PPO fine-tuning with a sparse success reward.
+
+Everything is float64 numpy with no autograd: each forward caches what its backward needs, and
+every backward is checked against central finite differences in tests/test_agent.py.
+Randomness only through a passed np.random.Generator (or an integer seed for initialisation).
+"""
+import os
+import zipfile
+
+import numpy as np
+
+FORMAT_VERSION = 1
+N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the table
+
+
+# ---- Building blocks: MLP, Adam, gradient clipping ---------------------------------------
+
+class MLP:
+    """tanh hidden layers, linear output.  h_{k+1} = tanh(h_k W_k + b_k); out = h_{L-1} W + b.
+
+    W_k ~ N(0, 1/fan_in) keeps pre-activations O(1); the last layer is scaled by out_scale
+    (0.01 for policy logits: a near-uniform initial policy explores every block and bin).
+    """
+
+    def __init__(self, sizes, seed=0, out_scale=1.0):
+        rng = np.random.default_rng(seed)
+        self.sizes, self.n_layers, self.params = list(sizes), len(sizes) - 1, {}
+        for k, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
+            scale = out_scale if k == self.n_layers - 1 else 1.0
+            self.params[f"W{k}"] = rng.standard_normal((fan_in, fan_out)) * (scale / np.sqrt(fan_in))
+            self.params[f"b{k}"] = np.zeros(fan_out)
+
+    def forward(self, x):
+        """x (B, in) -> (B, out).  Caches every layer's output for backward."""
+        self.hs = [x]
+        for k in range(self.n_layers):
+            z = self.hs[-1] @ self.params[f"W{k}"] + self.params[f"b{k}"]
+            self.hs.append(np.tanh(z) if k < self.n_layers - 1 else z)
+        return self.hs[-1]
+
+    def backward(self, dout):
+        """dout (B, out) = dL/d(out) -> grads {key: array like params}; sets self.dx (B, in)."""
+        grads, d = {}, dout
+        for k in reversed(range(self.n_layers)):
+            if k < self.n_layers - 1:
+                d = d * (1.0 - self.hs[k + 1] ** 2)          # tanh'(z) = 1 - tanh(z)^2
+            grads[f"W{k}"] = self.hs[k].T @ d                 # dL/dW = h^T dz
+            grads[f"b{k}"] = d.sum(0)
+            d = d @ self.params[f"W{k}"].T                    # dL/dh = dz W^T
+        self.dx = d
+        return grads
+
+
+class Adam:
+    """Adam with bias correction; updates the arrays of `params` in place (so the networks,
+    which hold the same arrays, see the new values).
+        m = b1 m + (1-b1) g;  v = b2 v + (1-b2) g^2;  p -= lr mhat / (sqrt(vhat) + eps)
+    """
+
+    def __init__(self, params, lr=3e-4, betas=(0.9, 0.999), eps=1e-8):
+        self.params, self.lr, (self.b1, self.b2), self.eps, self.t = params, lr, betas, eps, 0
+        self.m = {k: np.zeros_like(p) for k, p in params.items()}
+        self.v = {k: np.zeros_like(p) for k, p in params.items()}
+
+    def step(self, grads):
+        self.t += 1
+        c1, c2 = 1.0 - self.b1 ** self.t, 1.0 - self.b2 ** self.t
+        for k, g in grads.items():
+            self.m[k] = self.b1 * self.m[k] + (1.0 - self.b1) * g
+            self.v[k] = self.b2 * self.v[k] + (1.0 - self.b2) * g * g
+            self.params[k] -= self.lr * (self.m[k] / c1) / (np.sqrt(self.v[k] / c2) + self.eps)
+
+
+def clip_grad_norm(grads, max_norm):
+    """Rescale all grads together so their global L2 norm is <= max_norm -> (grads, total_norm)."""
+    total = float(np.sqrt(sum(float(np.sum(g * g)) for g in grads.values())))
+    if max_norm is not None and total > max_norm:
+        grads = {k: g * (max_norm / (total + 1e-12)) for k, g in grads.items()}
+    return grads, total
+
+
+# ---- Features and the set network (sec 3: one shared network per block, pooled context) ----
+
+def featurize(obs, n_y=None, block_size=(0.10, 0.05), table_x=(-0.5, 0.5), threshold=0.02):
+    """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, 10 + 2 n_y + 2 N_RBF).
+
+    Besides normalised pose, goal and offset to goal, each block gets one-hot codes of its layer
+    and goal layer and RBF codes of its x and goal x.  Mean/max pooling of their embeddings then
+    gives every block a map of where the blocks and goals are, which it needs to decide where
+    a support must go.  Goal columns are multiplied by has_goal, so "no goal" is all zeros.
+    """
+    obs = np.asarray(obs, dtype=np.float64)
+    if obs.ndim != 3 or obs.shape[-1] != 6:
+        raise ValueError(f"obs must have shape (B, n, 6), got {obs.shape}")
+    n_y = obs.shape[1] if n_y is None else n_y
+    w, h = block_size
+    half, mid = (table_x[1] - table_x[0]) / 2, (table_x[1] + table_x[0]) / 2
+    x, y, ang, gx, gy, g = (obs[..., j] for j in range(6))
+    g = (g > 0.5).astype(np.float64)
+    dist = np.hypot(gx - x, gy - y)
+    layer = lambda v: np.clip(np.round(v / h - 0.5), 0, n_y - 1).astype(np.int64)
+    onehot = lambda k: np.eye(n_y)[k]                                   # (B, n) -> (B, n, n_y)
+    centres = np.linspace(table_x[0], table_x[1], N_RBF)
+    rbf = lambda v: np.exp(-0.5 * ((v[..., None] - centres) / (w / 4)) ** 2)
+    cols = [(x - mid) / half, y / (n_y * h), np.cos(ang), np.sin(ang), g,
+            g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h,
+            g * (dist < threshold)]
+    return np.concatenate([np.stack(cols, -1), onehot(layer(y)), g[..., None] * onehot(layer(gy)),
+                           rbf(x), g[..., None] * rbf(gx)], axis=-1)
+
+
+class SetNet:
+    """Deep set over blocks:  e_i = phi(f_i);  c = [mean_i e_i, max_i e_i];  o_i = rho([e_i, c]).
+
+    Permutation-equivariant, so one network serves every block.  phi = MLP([F, H, H]),
+    rho = MLP([3H, H, out]).  `params` holds the MLPs' own arrays under prefixed keys.
+    """
+
+    def __init__(self, n_features, hidden, out, seed=0, out_scale=1.0):
+        self.phi = MLP([n_features, hidden, hidden], seed=[*np.atleast_1d(seed), 0])
+        self.rho = MLP([3 * hidden, hidden, out], seed=[*np.atleast_1d(seed), 1], out_scale=out_scale)
+        self.params = {f"{name}.{k}": p for name in ("phi", "rho")
+                       for k, p in getattr(self, name).params.items()}
+
+    def forward(self, f):
+        """f (B, n, F) -> o (B, n, out)."""
+        B, n, F = f.shape
+        e = self.phi.forward(f.reshape(B * n, F)).reshape(B, n, -1)
+        self.argmax = e.argmax(axis=1)                                         # (B, H)
+        c = np.concatenate([e.mean(1), np.take_along_axis(e, self.argmax[:, None], 1)[:, 0]], -1)
+        z = np.concatenate([e, np.broadcast_to(c[:, None], (B, n, c.shape[-1]))], -1)
+        return self.rho.forward(z.reshape(B * n, -1)).reshape(B, n, -1)
+
+    def backward(self, dout):
+        """dout (B, n, out) -> grads {"phi.W0": ..., "rho.b1": ...} for the last forward."""
+        B, n, _ = dout.shape
+        g_rho = self.rho.backward(dout.reshape(B * n, -1))
+        dz = self.rho.dx.reshape(B, n, -1)
+        H = dz.shape[-1] // 3
+        de = dz[..., :H].copy()
+        dc = dz[..., H:].sum(1)                                # c is shared by all n blocks
+        de += dc[:, None, :H] / n                              # d mean / d e_i = 1/n
+        dmax = np.zeros_like(de)                               # d max / d e_i: only the argmax
+        np.put_along_axis(dmax, self.argmax[:, None], dc[:, None, H:], axis=1)
+        g_phi = self.phi.backward((de + dmax).reshape(B * n, H))
+        return {**{f"phi.{k}": v for k, v in g_phi.items()}, **{f"rho.{k}": v for k, v in g_rho.items()}}
+
+
+# ---- The factorised action distribution (sec 3):  pi(b, x, y) = pi(b) pi(x | b) pi(y | b) ----
+
+def log_softmax(z):
+    """Stable log softmax over the last axis: z - max - log sum exp(z - max)."""
+    z = z - z.max(-1, keepdims=True)
+    return z - np.log(np.exp(z).sum(-1, keepdims=True))
+
+
+def entropy_of(logp):
+    """H = -sum p log p over the last axis, from log-probs; 0 log 0 = 0 (finite for any logits)."""
+    p = np.exp(logp)
+    return -np.where(p > 0, p * logp, 0.0).sum(-1)
+
+
+class ActionDist:
+    """The policy at a batch of states, from actor outputs out (B, n, 1 + n_x + n_y):
+    per block i a block logit l_i, x-logits X_i (n_x,), layer logits Y_i (n_y,).
+
+        log pi(b, x, y) = logsoftmax(l)[b] + logsoftmax(X_b)[x] + logsoftmax(Y_b)[y]
+        H = H(b) + sum_b pi(b) (H(X_b) + H(Y_b))          (exact, no sampling)
+    """
+
+    def __init__(self, out, n_x):
+        self.shape = out.shape
+        self.lb = log_softmax(out[..., 0])                     # (B, n)
+        self.lx = log_softmax(out[..., 1:1 + n_x])             # (B, n, n_x)
+        self.ly = log_softmax(out[..., 1 + n_x:])              # (B, n, n_y)
+        self.pb = np.exp(self.lb)
+        self.hb, self.hx, self.hy = entropy_of(self.lb), entropy_of(self.lx), entropy_of(self.ly)
+
+    def log_prob(self, actions):
+        """actions (B, 3) int -> log pi (B,)."""
+        i, (b, x, y) = np.arange(len(actions)), np.asarray(actions, dtype=np.int64).T
+        return self.lb[i, b] + self.lx[i, b, x] + self.ly[i, b, y]
+
+    def entropy(self):
+        """-> H (B,)."""
+        return self.hb + (self.pb * (self.hx + self.hy)).sum(-1)
+
+    def sample(self, rng):
+        """-> actions (B, 3) int64: block first, then its x-bin and layer (inverse CDF)."""
+        i = np.arange(self.shape[0])
+        b = _categorical(self.pb, rng)
+        return np.stack([b, _categorical(np.exp(self.lx[i, b]), rng),
+                         _categorical(np.exp(self.ly[i, b]), rng)], -1)
+
+    def mode(self):
+        """-> the most likely joint action (B, 3): argmax_b [log pi(b) + max_x .. + max_y ..]."""
+        i = np.arange(self.shape[0])
+        b = (self.lb + self.lx.max(-1) + self.ly.max(-1)).argmax(-1)
+        return np.stack([b, self.lx[i, b].argmax(-1), self.ly[i, b].argmax(-1)], -1)
+
+    def backward(self, actions, a, c):
+        """d/d(out) of sum_k (a_k log pi(actions_k) + c_k H_k);  a, c scalars or (B,) -> (B, n, D).
+
+        Per categorical with logits z and log-probs lp:  d lp[k]/dz = onehot(k) - p,
+        dH/dz = -p (lp + H).  With K_b = H(X_b) + H(Y_b) and Kbar = sum_b pi(b) K_b:
+          dH/dl = -pi(b) (lb + H(b)) + pi(b) (K_b - Kbar);  dH/dX_b = pi(b) dH(X_b)/dX_b.
+        """
+        B, n, _ = self.shape
+        a, c = np.broadcast_to(a, (B,))[:, None], np.broadcast_to(c, (B,))[:, None]
+        i, (b, x, y) = np.arange(B), np.asarray(actions, dtype=np.int64).T
+        px, py = np.exp(self.lx), np.exp(self.ly)
+        K = self.hx + self.hy
+        Kbar = (self.pb * K).sum(-1, keepdims=True)
+        dl = -self.pb * (self.lb + self.hb[:, None]) + self.pb * (K - Kbar)
+        dX = -self.pb[..., None] * px * (self.lx + self.hx[..., None])
+        dY = -self.pb[..., None] * py * (self.ly + self.hy[..., None])
+        dout = c[..., None] * np.concatenate([dl[..., None], dX, dY], -1)
+        # log-prob part: only the chosen block's x and y heads get gradient
+        dout[..., 0] += a * (np.eye(n)[b] - self.pb)
+        dout[i, b, 1:1 + px.shape[-1]] += a * (np.eye(px.shape[-1])[x] - px[i, b])
+        dout[i, b, 1 + px.shape[-1]:] += a * (np.eye(py.shape[-1])[y] - py[i, b])
+        return dout
+
+
+def _categorical(p, rng):
+    """p (B, K) rows summing to 1 -> one index per row (int64, B,), via one uniform each."""
+    u = rng.random(len(p))[:, None]
+    return np.minimum((np.cumsum(p, -1) < u).sum(-1), p.shape[-1] - 1)
+
+
+# ---- Losses with their gradients w.r.t. the network outputs ------------------------------
+
+def bc_loss(out, actions, n_x):
+    """L_BC = -mean log pi(a | s, g)  -> (L, dL/d out (B, n, D))."""
+    dist = ActionDist(out, n_x)
+    B = len(actions)
+    return -dist.log_prob(actions).mean(), dist.backward(actions, -1.0 / B, 0.0)
+
+
+def ppo_loss(out, actions, logp_old, adv, n_x, clip=0.2, ent_coef=0.0):
+    """Clipped surrogate with entropy bonus (Schulman et al. 2017); adv already normalised.
+
+        r = exp(logp - logp_old);  L = -mean min(r A, clip(r, 1-eps, 1+eps) A) - c_ent mean H
+    d/dlogp of min(..) is r A where the unclipped term is the min, else 0 (the clipped term is
+    constant).  -> (L, dL/d out, info dict with the policy loss, entropy, ratios).
+    """
+    dist = ActionDist(out, n_x)
+    B = len(actions)
+    r = np.exp(dist.log_prob(actions) - logp_old)
+    unclipped, clipped = r * adv, np.clip(r, 1 - clip, 1 + clip) * adv
+    l_clip = -np.minimum(unclipped, clipped).mean()
+    H = dist.entropy()
+    a = -np.where(unclipped <= clipped, unclipped, 0.0) / B    # d L / d logp
+    dout = dist.backward(actions, a, -ent_coef / B)
+    return l_clip - ent_coef * H.mean(), dout, dict(policy_loss=l_clip, entropy=H.mean(), ratio=r)
+
+
+def value_loss(out, returns):
+    """V = mean_i o_i;  L = mean 0.5 (V - R)^2  -> (L, dL/d out (B, n, 1), V (B,))."""
+    B, n, _ = out.shape
+    V = out[..., 0].mean(-1)
+    dout = np.broadcast_to(((V - returns) / (B * n))[:, None, None], out.shape).copy()
+    return 0.5 * np.mean((V - returns) ** 2), dout, V
+
+
+def gae(rewards, values, terminated, truncated, next_values, gamma=0.99, lam=0.95):
+    """Generalised advantage estimation; all inputs (T, N) with time on axis 0.
+
+        delta_t = r_t + gamma V(s_{t+1}) (1 - term_t) - V(s_t)
+        A_t     = delta_t + gamma lam (1 - done_t) A_{t+1},   done = term or trunc
+    next_values[t] = V(s_{t+1}) of the real next state, so a truncated step bootstraps from it
+    while a terminated one does not.  -> advantages (T, N), returns = A + V (T, N).
+    """
+    r, v, te, tr, nv = (np.asarray(z, dtype=np.float64)
+                        for z in (rewards, values, terminated, truncated, next_values))
+    if not r.shape == v.shape == te.shape == tr.shape == nv.shape:
+        raise ValueError(f"gae: shapes differ {[z.shape for z in (r, v, te, tr, nv)]}")
+    adv, last = np.zeros_like(r), np.zeros(r.shape[1:])
+    for t in reversed(range(len(r))):
+        delta = r[t] + gamma * nv[t] * (1.0 - te[t]) - v[t]
+        last = delta + gamma * lam * (1.0 - np.maximum(te[t], tr[t])) * last
+        adv[t] = last
+    return adv, adv + v
+
+
+# ---- The agent ---------------------------------------------------------------------------
+
+class Agent:
+    """Policy pi(b, x, y | s, g) and value V(s, g), two SetNets with separate Adam states."""
+
+    def __init__(self, n_blocks=6, n_x=37, n_y=None, hidden=128, seed=0,
+                 block_size=(0.10, 0.05), table_x=(-0.5, 0.5), threshold=0.02):
+        self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
+        self.n_y = self.n_blocks if n_y is None else int(n_y)
+        self.geometry = dict(block_size=block_size, table_x=table_x, threshold=threshold)
+        F = featurize(np.zeros((1, self.n_blocks, 6)), self.n_y, **self.geometry).shape[-1]
+        self.actor = SetNet(F, hidden, 1 + self.n_x + self.n_y, seed=[seed, 0], out_scale=0.01)
+        self.critic = SetNet(F, hidden, 1, seed=[seed, 1])
+        self.actor_opt, self.critic_opt = Adam(self.actor.params), Adam(self.critic.params)
+        self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
+
+    def features(self, obs):
+        """obs (B, n, 6) -> (B, n, F); checks the number of blocks."""
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.ndim != 3 or obs.shape[1:] != (self.n_blocks, 6):
+            raise ValueError(f"obs must have shape (B, {self.n_blocks}, 6), got {obs.shape}")
+        return featurize(obs, self.n_y, **self.geometry)
+
+    def _batched(self, obs):
+        obs = np.asarray(obs, dtype=np.float64)
+        return (obs[None], True) if obs.ndim == 2 else (obs, False)
+
+    def act(self, obs, deterministic=False, rng=None):
+        """obs (n, 6) -> action (3,) int64, or (B, n, 6) -> (B, 3).  Samples with rng (default:
+        the agent's own seeded Generator), or takes the joint mode when deterministic."""
+        obs, single = self._batched(obs)
+        dist = ActionDist(self.actor.forward(self.features(obs)), self.n_x)
+        a = dist.mode() if deterministic else dist.sample(self.rng if rng is None else rng)
+        return a[0] if single else a
+
+    def value(self, obs):
+        """obs (n, 6) -> float, or (B, n, 6) -> V (B,)."""
+        obs, single = self._batched(obs)
+        v = np.concatenate([self.critic.forward(self.features(obs[i:i + 4096]))[..., 0].mean(-1)
+                            for i in range(0, max(len(obs), 1), 4096)])    # chunks bound memory
+        return float(v[0]) if single else v
+
+    def sample(self, obs, rng=None):
+        """obs (B, n, 6) -> actions (B, 3) int64, logp (B,), values (B,)  (for rollouts)."""
+        f = self.features(obs)
+        dist = ActionDist(self.actor.forward(f), self.n_x)
+        a = dist.sample(self.rng if rng is None else rng)
+        return a, dist.log_prob(a), self.critic.forward(f)[..., 0].mean(-1)
+
+    def bc(self, obs, actions, epochs, batch_size, lr, rng, max_grad_norm=None):
+        """Behaviour cloning (sec 4.1, 4.3): minimise L_BC = -mean log pi(a | s, g) by Adam.
+
+        obs (N, n, 6), actions (N, 3).  -> list of the mean minibatch loss of each epoch.
+        """
+        actions = np.asarray(actions, dtype=np.int64)
+        self._check_actions(actions)
+        loss = lambda out, a: bc_loss(out, a, self.n_x)
+        return self._fit(self.actor, self.actor_opt, loss, obs, actions, epochs, batch_size, lr, rng,
+                         max_grad_norm)
+
+    def fit_value(self, obs, returns, epochs, batch_size, lr, rng, max_grad_norm=None):
+        """Regress V(s, g) on returns (e.g. of demonstrations): L = mean 0.5 (V - R)^2.
+
+        obs (N, n, 6), returns (N,).  -> list of the mean minibatch loss of each epoch.
+        """
+        return self._fit(self.critic, self.critic_opt, value_loss, obs, np.asarray(returns, np.float64),
+                         epochs, batch_size, lr, rng, max_grad_norm)
+
+    def _fit(self, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng, max_grad_norm):
+        """Minibatch Adam on loss_fn(out, targets) -> (L, dL/dout, ...); features are computed
+        per minibatch, as (N, n, F) float64 for N = 100k would need ~300 MB."""
+        obs, opt.lr, losses = np.asarray(obs, dtype=np.float64), lr, []
+        for _ in range(epochs):
+            epoch = []
+            for idx in _minibatches(len(obs), batch_size, rng):
+                loss, dout = loss_fn(net.forward(self.features(obs[idx])), targets[idx])[:2]
+                opt.step(clip_grad_norm(net.backward(dout), max_grad_norm)[0])
+                epoch.append(loss)
+            losses.append(float(np.mean(epoch)))
+        return losses
+
+    def ppo_update(self, obs, actions, logp_old, adv, returns, epochs=4, minibatch=256, clip=0.2,
+                   ent_coef=0.01, vf_coef=0.5, lr=3e-4, max_grad_norm=0.5, rng=None):
+        """PPO epochs over one batch of N transitions: obs (N, n, 6), actions (N, 3), logp_old,
+        raw GAE advantages adv and returns (N,).  The advantages are normalised here, once over
+        the whole batch.  Actor: L = L_clip - c_ent H;  critic: c_v 0.5 (V - R)^2.  The two
+        networks share nothing, so each has its own Adam and its own gradient-norm clip (with
+        Adam, vf_coef matters only through that clip).
+
+        -> metrics, means over all minibatch updates unless noted:
+           policy_loss  L_clip (without the entropy term)
+           value_loss   0.5 (V - R)^2 (without vf_coef)
+           entropy      exact H of pi
+           approx_kl    mean (r - 1) - log r, an unbiased, non-negative estimate of KL(old || new)
+           clip_frac    fraction of samples with |r - 1| > clip
+           explained_variance  1 - Var(R - V) / Var(R) over the batch, V before the update
+                        (nan when Var(R) = 0)
+        """
+        rng = self.rng if rng is None else rng
+        obs, actions = np.asarray(obs, dtype=np.float64), np.asarray(actions, dtype=np.int64)
+        self._check_actions(actions)
+        logp_old, returns = np.asarray(logp_old, np.float64), np.asarray(returns, np.float64)
+        adv = np.asarray(adv, dtype=np.float64)
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        v_before = self.value(obs)
+        var_r = np.var(returns)
+        ev = float(1.0 - np.var(returns - v_before) / var_r) if var_r > 0 else float("nan")
+        self.actor_opt.lr = self.critic_opt.lr = lr
+        stats = []
+        for _ in range(epochs):
+            for idx in _minibatches(len(obs), minibatch, rng):
+                f = self.features(obs[idx])
+                _, dout, info = ppo_loss(self.actor.forward(f), actions[idx], logp_old[idx],
+                                         adv[idx], self.n_x, clip, ent_coef)
+                self.actor_opt.step(clip_grad_norm(self.actor.backward(dout), max_grad_norm)[0])
+                vl, dv, _ = value_loss(self.critic.forward(f), returns[idx])
+                g_critic = self.critic.backward(vf_coef * dv)
+                self.critic_opt.step(clip_grad_norm(g_critic, max_grad_norm)[0])
+                r = info["ratio"]
+                stats.append((info["policy_loss"], vl, info["entropy"], np.mean(r - 1 - np.log(r)),
+                              np.mean(np.abs(r - 1) > clip)))
+        names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac")
+        return {**dict(zip(names, np.mean(stats, 0).tolist())), "explained_variance": ev}
+
+    def _check_actions(self, actions):
+        hi = np.array([self.n_blocks, self.n_x, self.n_y])
+        if actions.ndim != 2 or actions.shape[1] != 3:
+            raise ValueError(f"actions must have shape (N, 3), got {actions.shape}")
+        bad = ((actions < 0) | (actions >= hi)).any(1)
+        if bad.any():
+            raise ValueError(f"actions must be ints below {hi.tolist()}, got {actions[bad][:5].tolist()}")
+
+    # -------------------------------------------------------------------------- persistence
+
+    def state_dict(self):
+        """{"actor.phi.W0": array, ...}: every parameter, no optimiser state."""
+        return {f"{net}.{k}": p for net in ("actor", "critic") for k, p in getattr(self, net).params.items()}
+
+    def save(self, path):
+        """Write the parameters plus header ("format_version", "sizes" = n_blocks, n_x, n_y,
+        hidden) as a plain .npz.  Atomic (a temporary file, then os.replace) and byte-identical
+        for identical parameters (fixed zip timestamps, sorted keys)."""
+        arrays = {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
+                  "sizes": np.array([self.n_blocks, self.n_x, self.n_y, self.hidden], dtype=np.int64),
+                  **self.state_dict()}
+        tmp = f"{path}.tmp{os.getpid()}"
+        try:
+            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED) as zf:
+                for key in sorted(arrays):
+                    info = zipfile.ZipInfo(key + ".npy", date_time=(1980, 1, 1, 0, 0, 0))
+                    with zf.open(info, "w", force_zip64=True) as fh:
+                        np.lib.format.write_array(fh, arrays[key], allow_pickle=False)
+            os.replace(tmp, path)
+        finally:
+            if os.path.exists(tmp):
+                os.remove(tmp)
+
+    @classmethod
+    def load(cls, path, **geometry):
+        """Read a file written by save -> Agent.  ValueError naming the file on a corrupt or
+        truncated file, a wrong format version, or keys/shapes that do not match the sizes."""
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+            raise ValueError(f"{path}: not a readable agent file ({type(e).__name__}: {e})") from e
+        if "format_version" not in data or "sizes" not in data:
+            raise ValueError(f"{path}: missing header (format_version, sizes)")
+        version, sizes = data["format_version"], data["sizes"]
+        if version.shape != () or version.dtype.kind not in "iu" or int(version) != FORMAT_VERSION:
+            raise ValueError(f"{path}: format_version {version}, expected {FORMAT_VERSION}")
+        if sizes.shape != (4,) or sizes.dtype.kind not in "iu" or (sizes < 1).any():
+            raise ValueError(f"{path}: sizes {sizes}, expected 4 positive ints "
+                             "(n_blocks, n_x, n_y, hidden)")
+        n_blocks, n_x, n_y, hidden = (int(k) for k in sizes)
+        agent = cls(n_blocks, n_x, n_y, hidden, **geometry)
+        params = agent.state_dict()
+        if set(params) != set(data) - {"format_version", "sizes"}:
+            diff = sorted(set(params) ^ (set(data) - {"format_version", "sizes"}))
+            raise ValueError(f"{path}: keys do not match sizes {sizes.tolist()}: {diff}")
+        for k, p in params.items():
+            if data[k].shape != p.shape or data[k].dtype.kind != "f" or not np.isfinite(data[k]).all():
+                raise ValueError(f"{path}: {k} is {data[k].dtype} {data[k].shape}, expected finite "
+                                 f"float {p.shape} for sizes {sizes.tolist()}")
+            p[...] = data[k]                      # in place: the networks and Adam share p
+        return agent
+
+
+def _minibatches(N, size, rng):
+    """A random permutation of range(N) cut into index arrays of at most `size`."""
+    perm = rng.permutation(N)
+    return [perm[i:i + size] for i in range(0, N, size)]

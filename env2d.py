@@ -1,0 +1,361 @@
+"""env2d.py -- the 2D side-view block world of taskexp (pymunk physics, Gymnasium API). ~350 lines.
+
+The world of "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu), sec 5,
+seen from the side: n_blocks rigid blocks (10 cm x 5 cm, 0.1 kg) on a table one metre wide, under
+gravity. One action picks a block up and puts it down somewhere else: the block is teleported to the
+centre of an x-bin (37 bins a quarter block apart) in a layer (y-bin, one block height each), with
+angle 0 and no velocity, and then physics runs until everything rests. A pose that overlaps another
+block makes the action a no-op -- the hand never pushes. A block put in mid air falls; a block put
+half over an edge may topple; a block that falls off the table lands on a catch floor half a metre
+below and stays in the state (its y is negative). A task is a set of goals {block: (x, y)}; it is
+solved when every goal block rests within THRESHOLD of its target. The state is the array
+(n_blocks, 6) of x, y, angle, vx, vy, w, and the space is rebuilt from it at every step, so a step
+depends on (state, action) alone, bit for bit: a saved state replays exactly.
+"""
+import math
+
+import gymnasium
+import numpy as np
+import pymunk
+import pymunk.batch
+from gymnasium import spaces
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.patches import Rectangle
+
+BLOCK_W, BLOCK_H = 0.10, 0.05               # metres; width twice the height
+TABLE_X = (-0.5, 0.5)                       # ten block widths
+THRESHOLD = 0.02                            # a goal holds within 2 cm (euclidean, block centre)
+N_X = 37
+X_BINS = np.linspace(-0.45, 0.45, N_X)      # spacing BLOCK_W / 4; a block on any bin lies on the table
+
+# Physics. Measured with pymunk 7.3.1: thin segments let blocks tunnel (hence a thick table box);
+# a 0.5 mm drop gap avoids the spin of a block born touching another; the default slop is far too
+# loose for 5 cm blocks.
+DT = 1 / 60
+GRAVITY = -9.81
+MASS = 0.1
+FRICTION = 0.8
+SLOP = 0.001                                # allowed penetration (m); resting blocks sink this much
+BIAS = 0.5 ** 60                            # fraction of overlap left after one second
+DROP_GAP = 0.0005                           # teleport this far above the layer centre
+FLOOR_Y = -0.5                              # the catch floor under the table
+# Rest: REST_SUBSTEPS consecutive substeps with |v| < REST_V, |w| < REST_W and no point of any block
+# further than REST_MOVE from where it was when the quiet run began; at most MAX_SUBSTEPS (see _settle).
+REST_V, REST_W, REST_MOVE, REST_SUBSTEPS, MAX_SUBSTEPS = 0.01, 0.05, 0.0005, 10, 300
+CHECK_EVERY = 5                             # read the bodies every 5th substep (a read + test ~ a step)
+HALF_DIAG = 0.5 * np.hypot(BLOCK_W, BLOCK_H)  # a rotation dtheta moves a corner by <= HALF_DIAG*dtheta
+# |(dx, dy, dangle, vx, vy, w)| @ REST_CRITERIA: the three rest measures, each over its threshold
+REST_CRITERIA = np.array([[1, 0, 0], [1, 0, 0], [HALF_DIAG, 0, 0], [0, 1, 0], [0, 1, 0], [0, 0, 1]]
+                         ) / np.array([REST_MOVE, REST_V, REST_W])
+OVERLAP_TOL = SLOP                          # penetration tolerated when testing a teleport pose
+# pymunk's Space.step wraps chipmunk's cpSpaceStep with bookkeeping for callbacks and deferred
+# adds/removes, which we do not use; that costs a fifth of a substep, so _settle calls chipmunk directly.
+_space_step = pymunk._chipmunk_cffi.lib.cpSpaceStep
+_update_position = pymunk._chipmunk_cffi.lib.cpBodyUpdatePosition     # see _load
+COLOURS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
+           "tab:olive"]
+
+
+def observation(state, goals):
+    """Observation (n, 6) float32 of a state (n, 6) and goals {block: (x, y)}:
+    columns x, y, angle, goal_x, goal_y, has_goal (goal columns 0 for blocks without a goal)."""
+    obs = np.zeros((len(state), 6), np.float32)
+    obs[:, :3] = state[:, :3]
+    for b, (x, y) in goals.items():
+        obs[b, 3:] = (x, y, 1.0)
+    return obs
+
+
+def is_success(state, goals, threshold=THRESHOLD):
+    """True iff every goal block's centre is within `threshold` of its target (state (n, 6))."""
+    return all(np.hypot(state[b, 0] - x, state[b, 1] - y) < threshold for b, (x, y) in goals.items())
+
+
+def overlap_depth(pose, others):
+    """Penetration depth (m,) of an upright block at pose (x, y) into blocks others (m, >=3): x, y, angle.
+
+    Separating axis test for two rectangles: along an axis n their projections overlap by
+    r_A(n) + r_B(n) - |d . n| (d the offset of the centres, r(n) = W/2 |u . n| + H/2 |v . n| for a
+    block with axes u, v); the depth is the least overlap over the four edge normals x, y, u, v.
+    <= 0 means apart or touching. (A plain loop: 4x faster than numpy for a handful of blocks.)
+    """
+    hw, hh = BLOCK_W / 2, BLOCK_H / 2
+    depth = []
+    for x, y, angle in np.asarray(others, dtype=float)[:, :3].tolist():
+        dx, dy, cos, sin = x - pose[0], y - pose[1], math.cos(angle), math.sin(angle)
+        r_x = hw * abs(cos) + hh * abs(sin)              # r_B(x) = r_A(u)
+        r_y = hw * abs(sin) + hh * abs(cos)              # r_B(y) = r_A(v)
+        depth.append(min(hw + r_x - abs(dx), hh + r_y - abs(dy),
+                         hw + r_x - abs(dx * cos + dy * sin), hh + r_y - abs(dy * cos - dx * sin)))
+    return np.array(depth)
+
+
+def draw_scene(ax, state, goals=None, title=None):
+    """Draw a state (n, 6) on a matplotlib Axes: the table, blocks with their ids, goals as dashed
+    outlines in their block's colour. Fixed limits, so frames of an episode line up. Returns ax."""
+    n = len(state)
+    ax.add_patch(Rectangle((TABLE_X[0], -0.05), TABLE_X[1] - TABLE_X[0], 0.05, color="0.55"))
+    for b, (x, y) in (goals or {}).items():
+        ax.add_patch(Rectangle((x - BLOCK_W / 2, y - BLOCK_H / 2), BLOCK_W, BLOCK_H, fill=False,
+                               ls="--", lw=1.5, ec=COLOURS[b % len(COLOURS)]))
+    for b, (x, y, angle) in enumerate(state[:, :3]):
+        ax.add_patch(Rectangle((x - BLOCK_W / 2, y - BLOCK_H / 2), BLOCK_W, BLOCK_H, alpha=0.85,
+                               angle=np.degrees(angle), rotation_point="center",
+                               fc=COLOURS[b % len(COLOURS)], ec="k", lw=0.8))
+        ax.text(x, y, str(b), ha="center", va="center", fontsize=8, color="w")
+    ax.set_xlim(TABLE_X[0] - 0.05, TABLE_X[1] + 0.05)
+    ax.set_ylim(-0.05, n * BLOCK_H + 0.1)
+    ax.set_aspect("equal")
+    if title:
+        ax.set_title(title)
+    return ax
+
+
+class BlockWorld(gymnasium.Env):
+    """The block world as a Gymnasium environment (see the module docstring).
+
+    action (block, x-bin, y-bin) in MultiDiscrete([n_blocks, N_X, n_blocks]);
+    observation (n_blocks, 6) float32, see observation(); reward 1.0 on success (then terminated).
+    """
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(self, n_blocks=6, max_steps=10, render_mode=None):
+        if not (isinstance(n_blocks, (int, np.integer)) and 2 <= n_blocks <= 8):
+            raise ValueError(f"n_blocks={n_blocks!r}: need an int in 2..8 to fit the table")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode={render_mode!r}: only None or 'rgb_array'")
+        self.n_blocks, self.max_steps, self.render_mode = int(n_blocks), int(max_steps), render_mode
+        self.block_size, self.table_x, self.threshold = (BLOCK_W, BLOCK_H), TABLE_X, THRESHOLD
+        self.x_bins = X_BINS.copy()
+        self.y_bins = (np.arange(self.n_blocks) + 0.5) * BLOCK_H
+        self.action_space = spaces.MultiDiscrete([self.n_blocks, N_X, self.n_blocks])
+        self.observation_space = spaces.Box(-np.inf, np.inf, (self.n_blocks, 6), np.float32)
+        # Bodies and shapes are made once and moved into a fresh Space at every step (cheaper than
+        # new objects; a fresh Space has no cached contacts, so results depend on the state only).
+        self._table = pymunk.Body(body_type=pymunk.Body.STATIC)
+        (left, right), bottom = TABLE_X, FLOOR_Y - 0.1
+        top = pymunk.Poly(self._table, [(left, -0.05), (right, -0.05), (right, 0), (left, 0)])  # 5 cm thick
+        floor = pymunk.Poly(self._table, [(-5, bottom), (5, bottom), (5, FLOOR_Y), (-5, FLOOR_Y)])
+        self._bodies = [pymunk.Body(MASS, pymunk.moment_for_box(MASS, (BLOCK_W, BLOCK_H)))
+                        for _ in range(self.n_blocks)]
+        shapes = [top, floor] + [pymunk.Poly.create_box(b, (BLOCK_W, BLOCK_H)) for b in self._bodies]
+        for shape in shapes:
+            shape.friction, shape.elasticity = FRICTION, 0.0
+        self._everything = [self._table, *self._bodies, *shapes]
+        self._space, self._buffer = pymunk.Space(), pymunk.batch.Buffer()   # the buffer: for reading
+        self._space.add(*self._everything)           # the bodies always live in self._space
+        # For setting them: a buffer wrapping self._rows (n + 1, 6), the last row the table's.
+        # It is never read into (a read could reallocate numpy's memory).
+        self._rows, self._setter = np.zeros((self.n_blocks + 1, 6)), pymunk.batch.Buffer()
+        self._setter.set_float_buf(self._rows)
+        self._fields = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
+                        | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
+        self._state, self._goals = np.zeros((self.n_blocks, 6)), {}
+        self._steps, self._stable = 0, True
+
+    # -- state, goals, actions ------------------------------------------------------------------
+
+    def get_state(self):
+        """A copy of the state (n_blocks, 6) float64: x, y, angle, vx, vy, w."""
+        return self._state.copy()
+
+    @property
+    def goals(self):
+        """A copy of the goals {block: (x, y)}."""
+        return dict(self._goals)
+
+    def encode_action(self, block, x, y):
+        """The action (3,) int64 whose bins are nearest to (x, y) for this block."""
+        if not 0 <= int(block) < self.n_blocks or int(block) != block:
+            raise ValueError(f"block {block!r} not in 0..{self.n_blocks - 1}")
+        if not (np.isfinite(x) and np.isfinite(y)):
+            raise ValueError(f"position ({x!r}, {y!r}) not finite")
+        return np.array([block, np.abs(self.x_bins - x).argmin(), np.abs(self.y_bins - y).argmin()], np.int64)
+
+    def decode_action(self, action):
+        """(block, x, y) of an action (3,): the block id and the centre it is teleported to."""
+        b, ix, iy = self._check_action(action)
+        return b, float(self.x_bins[ix]), float(self.y_bins[iy])
+
+    def _check_action(self, action):
+        a = np.asarray(action)
+        if a.shape != (3,) or a.dtype.kind not in "iu" or not ((a >= 0) & (a < self.action_space.nvec)).all():
+            raise ValueError(f"action {action!r} not 3 ints in MultiDiscrete({self.action_space.nvec.tolist()})")
+        return int(a[0]), int(a[1]), int(a[2])
+
+    def _check_goals(self, goals):
+        if not isinstance(goals, dict) or not 1 <= len(goals) <= self.n_blocks:
+            raise ValueError(f"goals {goals!r}: need a dict {{block: (x, y)}} of 1..{self.n_blocks} goals")
+        checked = {}
+        for b, xy in goals.items():
+            if not isinstance(b, (int, np.integer)) or not 0 <= b < self.n_blocks:
+                raise ValueError(f"goal for block {b!r}: no such block (0..{self.n_blocks - 1})")
+            try:
+                x, y = (float(v) for v in xy)
+            except (TypeError, ValueError):
+                raise ValueError(f"goal {xy!r} of block {b}: need two numbers (x, y)") from None
+            if not (np.isfinite(x) and TABLE_X[0] <= x <= TABLE_X[1]):
+                raise ValueError(f"goal {xy!r} of block {b}: x off the table {TABLE_X}")
+            if not (np.isfinite(y) and y >= BLOCK_H / 2 - THRESHOLD):
+                raise ValueError(f"goal {xy!r} of block {b}: y below the table top")
+            checked[int(b)] = (float(x), float(y))
+        return checked
+
+    # -- Gymnasium API --------------------------------------------------------------------------
+
+    def reset(self, seed=None, options=None):
+        """Start an episode. options: "state" (n_blocks, 6) to start from, "goals" {block: (x, y)}.
+
+        Without a state the blocks are scattered on the table, keeping goal footprints free; without
+        goals one random block gets a goal on a free table spot. Returns (obs (n, 6), info).
+        """
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"state", "goals"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}: only 'state' and 'goals'")
+        goals = self._check_goals(options["goals"]) if "goals" in options else None
+        if "state" in options:
+            state = np.array(options["state"], dtype=np.float64)
+            if state.shape != (self.n_blocks, 6) or not np.isfinite(state).all():
+                raise ValueError(f"state of shape {state.shape} (need ({self.n_blocks}, 6), finite): "
+                                 f"{options['state']!r}")
+            if goals is None:
+                goals = self._random_goal(state)
+        else:
+            if goals is None:
+                goals = {int(self.np_random.integers(self.n_blocks)):
+                         (float(self.np_random.choice(self.x_bins)), float(self.y_bins[0]))}
+            state = np.zeros((self.n_blocks, 6))
+            state[:, 0], state[:, 1] = self._scatter(goals), BLOCK_H / 2
+        self._state, self._goals, self._steps = state, goals, 0
+        speeds = np.abs(state[:, 3:]) @ REST_CRITERIA[3:, 1:]           # (|vx| + |vy|) / REST_V, |w| / REST_W
+        self._stable = bool(speeds.max() < 1.0)
+        return observation(self._state, self._goals), {"success": is_success(state, goals)}
+
+    def step(self, action):
+        """Teleport, then settle. Returns (obs (n, 6), reward, terminated, truncated, info).
+
+        info: "noop" (the pose overlapped a block: nothing moved), "stable" (came to rest; after a
+        no-op, as before), "success" (= terminated), "settle_steps" (substeps simulated, 0 for a no-op).
+        """
+        b, ix, iy = self._check_action(action)
+        pose = (self.x_bins[ix], self.y_bins[iy] + DROP_GAP)
+        others = self._state[np.arange(self.n_blocks) != b, :3]
+        noop = bool((overlap_depth(pose, others) > OVERLAP_TOL).any())
+        substeps = 0
+        if not noop:
+            start = self._state.copy()
+            start[b] = (*pose, 0.0, 0.0, 0.0, 0.0)
+            self._load(start)
+            substeps, self._stable, self._state = self._settle(start)
+            angle = self._state[:, 2]          # keep it in [-pi, pi] (a tumbled block may pass pi)
+            self._state[:, 2] = np.where(np.abs(angle) > np.pi, (angle + np.pi) % (2 * np.pi) - np.pi, angle)
+        self._steps += 1
+        success = is_success(self._state, self._goals) and self._stable
+        truncated = self._steps >= self.max_steps and not success
+        info = {"noop": noop, "stable": self._stable, "success": success, "settle_steps": substeps}
+        return observation(self._state, self._goals), float(success), success, truncated, info
+
+    def render(self):
+        """The scene as an image (H, W, 3) uint8 when render_mode == "rgb_array", else None."""
+        if self.render_mode != "rgb_array":
+            return None
+        fig = Figure(figsize=(6.4, 3.2), dpi=100)
+        canvas = FigureCanvasAgg(fig)
+        draw_scene(fig.add_subplot(), self._state, self._goals, title=f"step {self._steps}")
+        canvas.draw()
+        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+    # -- scattering and goals -------------------------------------------------------------------
+
+    def _scatter(self, goals):
+        """x (n,) of blocks scattered on the table without overlaps, off the goals' footprints.
+
+        The table minus the footprints is a set of free segments; n of the segments' block-sized
+        slots are drawn at random, and within a segment holding k blocks the free length is split
+        by k sorted uniform draws (stars and bars), so blocks never overlap. If the footprints
+        leave too little room only the ground-layer goals are kept free, then none.
+        """
+        targets = list(goals.values())
+        for keep in (targets, [g for g in targets if g[1] < BLOCK_H], []):
+            segments = _free_segments([x for x, _ in keep])
+            room = [int(np.floor((hi - lo) / BLOCK_W + 1e-9)) for lo, hi in segments]
+            if sum(room) >= self.n_blocks:
+                break
+        owner = np.repeat(np.arange(len(segments)), room)
+        counts = np.bincount(owner[self.np_random.choice(len(owner), self.n_blocks, replace=False)],
+                             minlength=len(segments))
+        xs = []
+        for (lo, hi), k in zip(segments, counts):
+            slack = max(hi - lo - k * BLOCK_W, 0.0)
+            xs.extend(lo + np.sort(self.np_random.uniform(0, slack, k)) + BLOCK_W * (np.arange(k) + 0.5))
+        return self.np_random.permutation(np.array(xs))
+
+    def _random_goal(self, state):
+        """One goal {block: (x, y_0)} on a table spot no block overlaps (any spot if none is free)."""
+        free = [x for x in self.x_bins if not (overlap_depth((x, self.y_bins[0]), state) > OVERLAP_TOL).any()]
+        b = int(self.np_random.integers(self.n_blocks))
+        return {b: (float(self.np_random.choice(free or self.x_bins)), float(self.y_bins[0]))}
+
+    # -- physics --------------------------------------------------------------------------------
+
+    def _load(self, state):
+        """Move the table and the blocks, posed as in state (n, 6), into a fresh pymunk Space.
+
+        Only the state may carry over from the last step: the bodies' bias velocities (chipmunk's
+        penetration correction) are zeroed by an update with dt = 0, and the poses are set before
+        the shapes enter the new space, whose spatial index is then built from them alone.
+        """
+        for body in self._bodies:
+            _update_position(body._body, 0.0)
+        # all bodies in one call: dynamic ones in insertion order, then the table at (0, 0, 0)
+        self._rows[:-1] = state
+        pymunk.batch.set_space_bodies(self._space, self._fields, self._setter)
+        self._space.remove(*self._everything)
+        self._space = space = pymunk.Space()
+        space.gravity, space.collision_slop, space.collision_bias = (0.0, GRAVITY), SLOP, BIAS
+        space.add(*self._everything)
+
+    def _read(self):
+        """All blocks at once (n, 6): x, y, angle, vx, vy, w (dynamic bodies come in insertion order)."""
+        self._buffer.clear()
+        pymunk.batch.get_space_bodies(self._space, self._fields, self._buffer)
+        return np.frombuffer(self._buffer.float_buf(), np.float64)[: 6 * self.n_blocks].reshape(-1, 6).copy()
+
+    def _settle(self, start):
+        """Step until rest or MAX_SUBSTEPS. Returns (substeps, at rest, final state (n, 6)).
+
+        Bodies are read every CHECK_EVERY substeps. A read is quiet when, for every block,
+            (|dx| + |dy| + HALF_DIAG |dangle|) / REST_MOVE < 1   (no point moved REST_MOVE since the anchor)
+            (|vx| + |vy|) / REST_V < 1  and  |w| / REST_W < 1
+        (L1 norms: a little stricter than the euclidean ones), where the anchor is the last read that
+        was not quiet. Rest = quiet reads for REST_SUBSTEPS substeps after the anchor.
+        """
+        anchor, quiet = start.copy(), 0      # start (n, 6): the state just loaded
+        anchor[:, 3:] = 0.0                  # so |now - anchor| holds pose changes and speeds
+        for k in range(CHECK_EVERY, MAX_SUBSTEPS + 1, CHECK_EVERY):
+            for _ in range(CHECK_EVERY):
+                _space_step(self._space._space, DT)
+            now = self._read()
+            if (np.abs(now - anchor) @ REST_CRITERIA).max() >= 1.0:
+                anchor, quiet = now.copy(), 0
+                anchor[:, 3:] = 0.0
+            else:
+                quiet += CHECK_EVERY
+                if quiet >= REST_SUBSTEPS:
+                    return k, True, now
+        return MAX_SUBSTEPS, False, now
+
+
+def _free_segments(goal_xs):
+    """Free stretches [(lo, hi), ...] of the table once the footprints of goals at goal_xs are removed."""
+    segments, lo = [], TABLE_X[0]
+    for x in sorted(goal_xs):
+        if x - BLOCK_W / 2 > lo:
+            segments.append((lo, min(x - BLOCK_W / 2, TABLE_X[1])))
+        lo = max(lo, x + BLOCK_W / 2)
+    if lo < TABLE_X[1]:
+        segments.append((lo, TABLE_X[1]))
+    return segments

@@ -1,0 +1,609 @@
+"""taskexp.py -- task expansion end to end: base skills, expansion rounds, zero-shot evaluation.
+
+The pipeline of "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu),
+sections 4 and 5, on the 2D block world of env2d.py with the numpy agent of agent.py:
+
+  sec 4.1  base policy   single-block demos -> behaviour cloning -> PPO fine-tuning
+  sec 4.2  expansion     successful trajectory s0 -> sT, K one-alteration candidates g,
+                         g* = argmax_g V(sT, g) - V(s0, g)   (equation 1),
+                         run the policy from sT toward g*: join on success, relabel on failure
+  sec 4.3  distillation  BC on the generated demos, then PPO on the generated tasks; repeat
+  sec 5    evaluation    zero-shot success on held-out shapes ("I", "Y", "3T") after every round
+
+    python taskexp.py --rounds 3            # the laptop run behind the README's numbers
+    python taskexp.py --select end2new      # an ablation of Table 3
+
+A task is a pair (s0, goals): a state array (n_blocks, 6) and a dict {block: (x, y)}.
+~600 lines; keep it there.
+"""
+import os
+
+# Tiny matmuls are 10-100x slower with two BLAS threads here, and results drift: pin to one
+# before numpy loads its BLAS.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from agent import Agent, gae
+from env2d import BLOCK_H, BLOCK_W, BlockWorld, observation
+
+
+@dataclass
+class Config:
+    """Every knob of a run. The defaults are the laptop run that the README reports."""
+    seed: int = 0
+    rounds: int = 3                 # rounds of task expansion + self-distillation (sec 4.2-4.3)
+    n_blocks: int = 6
+    max_steps: int = 10             # actions per episode before truncation
+    hidden: int = 128               # width of the actor's and critic's per-block networks
+    n_envs: int = 32                # environments stepped in lockstep (one batched policy call)
+    # sec 4.1: base skills
+    base_demos: int = 20000         # single-block demonstrations
+    bc_epochs: int = 8
+    bc_batch: int = 256
+    bc_lr: float = 1e-3
+    # PPO (used for base fine-tuning, self-distillation and the direct-PPO baseline)
+    ppo_steps: int = 20000          # environment steps per PPO phase
+    ppo_episodes: int = 256         # episodes per PPO update
+    ppo_epochs: int = 4
+    ppo_minibatch: int = 256
+    ppo_lr: float = 3e-4
+    clip: float = 0.2
+    ent_coef: float = 0.003
+    vf_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    gamma: float = 0.9              # < 1 so V(s, g) also says how far the goal is
+    gae_lambda: float = 0.95
+    # sec 4.2: task expansion
+    expand_episodes: int = 1500     # attempts on the previous round's tasks per round
+    candidates: int = 32            # K one-alteration candidates per successful trajectory
+    select: str = "ours"            # ours | end2new | init2new   (Table 3)
+    restrict: bool = True           # False: candidates are unrelated random tasks (Table 3)
+    # sec 4.3: self-distillation
+    buffer_size: int = 60000        # demo steps kept for BC (oldest dropped first): the memory bound
+    # sec 5: evaluation
+    eval_episodes: int = 100        # per shape and round
+    baseline: str = ""              # "direct-ppo": PPO on the evaluation tasks instead (sec 5.3)
+    shapes: tuple = ("I", "Y", "3T")
+
+
+# --------------------------------------------------------------------------------------------
+# Goals and shapes
+# --------------------------------------------------------------------------------------------
+
+def layer(y):
+    """Layer index of a height y (layer 0 rests on the table)."""
+    return int(round(y / BLOCK_H - 0.5))
+
+
+def position(ix, k, env):
+    """Centre (x, y) of x-bin ix in layer k."""
+    return (float(env.x_bins[ix]), float(env.y_bins[k]))
+
+
+# Held-out shapes (sec 5): (offset from the centre in block widths, layer). None of them can occur
+# among the base tasks (at most 3 goals, at most one block moved), and each has >= 4 goals with
+# >= 3 above the ground. Drawings are in the README.
+SHAPES = {
+    "I": [(0, 0), (0, 1), (0, 2), (0, 3)],                              # a tower of four
+    "Y": [(-0.75, 0), (0.75, 0), (0, 1), (0, 2), (0, 3)],               # upside down: stem on two legs
+    "3T": [(-1, 0), (0, 0), (1, 0), (-0.5, 1), (0.5, 1), (0, 2)],       # three tiers, 3-2-1
+}
+
+
+def shape_goals(name, env, rng):
+    """Goals for a held-out shape at a random place, with randomly assigned blocks.
+
+    Returns {block: (x, y)}; the shape's centre lies on the x grid so every goal is reachable.
+    """
+    cells = SHAPES[name]
+    reach = max(abs(dx) for dx, _ in cells) * BLOCK_W
+    centres = env.x_bins[(env.x_bins - reach >= env.x_bins[0] - 1e-9) & (env.x_bins + reach <= env.x_bins[-1] + 1e-9)]
+    cx = centres[rng.integers(len(centres))]
+    blocks = rng.permutation(env.n_blocks)[: len(cells)]
+    return {int(b): (float(cx + dx * BLOCK_W), float(env.y_bins[k])) for b, (dx, k) in zip(blocks, cells)}
+
+
+def start_state(env, goals, rng):
+    """A random scattered scene for these goals (the env keeps goal footprints clear)."""
+    env.reset(seed=int(rng.integers(2**31)), options={"goals": goals})
+    return env.get_state()
+
+
+def on_table(state, env):
+    """True when every block rests on the table (none fell off the edge)."""
+    return bool(np.all(state[:, 1] > 0) and np.all(np.abs(state[:, 0]) < env.table_x[1]))
+
+
+# --------------------------------------------------------------------------------------------
+# Rollouts
+# --------------------------------------------------------------------------------------------
+
+@dataclass
+class Trajectory:
+    """One episode. states (T+1, n, 6), actions (T, 3); logp and values (T,) from the sampler."""
+    goals: dict
+    states: np.ndarray
+    actions: np.ndarray
+    success: bool
+    logp: np.ndarray = None
+    values: np.ndarray = None
+
+    def obs(self, goals=None):
+        """Observations (T+1, n, 6) of the visited states under `goals` (default: its own)."""
+        g = self.goals if goals is None else goals
+        return np.stack([observation(s, g) for s in self.states])
+
+
+def run_episodes(agent, tasks, envs, rng, deterministic=False, progress=None):
+    """Run one episode per task, len(envs) at a time with one batched policy call per step.
+
+    tasks: list of (state (n, 6), goals). Returns a list of Trajectory in the order of `tasks`.
+    """
+    out = [None] * len(tasks)
+    todo = iter(range(len(tasks)))
+    slots = [None] * len(envs)
+
+    def start(k):
+        i = next(todo, None)
+        if i is None:
+            slots[k] = None
+            return
+        state, goals = tasks[i]
+        obs, _ = envs[k].reset(options={"state": state, "goals": goals})
+        slots[k] = dict(i=i, obs=obs, states=[envs[k].get_state()], actions=[], logp=[], values=[])
+
+    for k in range(len(envs)):
+        start(k)
+    while True:
+        active = [k for k, s in enumerate(slots) if s is not None]
+        if not active:
+            return out
+        obs = np.stack([slots[k]["obs"] for k in active])
+        if deterministic:
+            actions, logp, values = agent.act(obs, deterministic=True), np.zeros(len(active)), np.zeros(len(active))
+        else:
+            actions, logp, values = agent.sample(obs, rng)
+        for j, k in enumerate(active):
+            s = slots[k]
+            s["obs"], reward, terminated, truncated, _ = envs[k].step(actions[j])
+            s["states"].append(envs[k].get_state())
+            s["actions"].append(actions[j])
+            s["logp"].append(logp[j])
+            s["values"].append(values[j])
+            if terminated or truncated:
+                out[s["i"]] = Trajectory(tasks[s["i"]][1], np.stack(s["states"]), np.stack(s["actions"]),
+                                         bool(terminated), np.array(s["logp"]), np.array(s["values"]))
+                if progress:
+                    progress.update(len(s["actions"]))
+                start(k)
+
+
+def success_rate(trajs):
+    return float(np.mean([t.success for t in trajs])) if trajs else 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# sec 4.1: base tasks -- one block moved, plus "stay where you are" goals for up to two others
+# --------------------------------------------------------------------------------------------
+
+def base_demos(cfg, env, rng, count, progress=None):
+    """Single-step demonstrations: a random block teleported onto the table or onto another block.
+
+    The goal is relabelled with where the block came to rest, so every demo is correct by
+    construction. Returns (tasks, obs (count, n, 6), actions (count, 3)).
+    """
+    tasks, obs, actions = [], [], []
+    n = env.n_blocks
+    while len(tasks) < count:
+        env.reset(seed=int(rng.integers(2**31)))
+        s0 = env.get_state()
+        b = int(rng.integers(n))
+        if rng.random() < 0.5:                     # somewhere on the table
+            x, k = env.x_bins[rng.integers(len(env.x_bins))], 0
+        else:                                      # on top of another block, overlapping by >= 3/4
+            j = int(rng.choice([i for i in range(n) if i != b]))
+            x, k = s0[j, 0] + rng.integers(-1, 2) * BLOCK_W / 4, layer(s0[j, 1]) + 1
+            if k >= n:
+                continue
+        a = env.encode_action(b, x, env.y_bins[k])
+        _, _, _, _, info = env.step(a)
+        s1 = env.get_state()
+        if info["noop"] or not info["stable"] or not on_table(s1, env):
+            continue
+        if np.linalg.norm(s1[b, :2] - s0[b, :2]) < env.threshold:
+            continue                               # nothing moved: nothing to learn
+        others = [int(i) for i in rng.permutation([i for i in range(n) if i != b])]
+        stay = others[: int(rng.integers(0, 3))]   # uniform goal count 1..3
+        goals = {i: (float(s1[i, 0]), float(s1[i, 1])) for i in [b] + stay}
+        tasks.append((s0, goals))
+        obs.append(observation(s0, goals))
+        actions.append(a)
+        if progress:
+            progress.update(1)
+    return tasks, np.stack(obs), np.stack(actions)
+
+
+# --------------------------------------------------------------------------------------------
+# PPO phase
+# --------------------------------------------------------------------------------------------
+
+def ppo_phase(agent, tasks, cfg, envs, rng, label):
+    """PPO on tasks sampled uniformly from `tasks` for cfg.ppo_steps environment steps.
+
+    Reward is 1 on success (the last step of a terminated episode), 0 otherwise; truncated
+    episodes bootstrap from V of their last state (handled by gae). Returns the per-update log.
+    """
+    log, steps = [], 0
+    progress = Progress(cfg.ppo_steps, label)
+    while steps < cfg.ppo_steps:
+        batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.ppo_episodes)]
+        trajs = run_episodes(agent, batch, envs, rng)
+        obs, actions, logp, adv, ret = ppo_batch(agent, trajs, cfg)
+        metrics = agent.ppo_update(obs, actions, logp, adv, ret, epochs=cfg.ppo_epochs,
+                                   minibatch=cfg.ppo_minibatch, clip=cfg.clip, ent_coef=cfg.ent_coef,
+                                   vf_coef=cfg.vf_coef, lr=cfg.ppo_lr, max_grad_norm=cfg.max_grad_norm,
+                                   rng=rng)
+        steps += len(actions)
+        metrics.update(steps=steps, success=success_rate(trajs))
+        log.append(metrics)
+        progress.update(len(actions), f"success {metrics['success']:.2f}")
+    progress.close()
+    return log
+
+
+def ppo_batch(agent, trajs, cfg):
+    """Flatten episodes into one sequence (T_total, 1) and compute GAE advantages and returns."""
+    all_obs = [t.obs() for t in trajs]
+    obs = np.concatenate([o[:-1] for o in all_obs])
+    actions = np.concatenate([t.actions for t in trajs])
+    logp = np.concatenate([t.logp for t in trajs])
+    values = np.concatenate([t.values for t in trajs])
+    last_v = agent.value(np.stack([o[-1] for o in all_obs]))          # V(s_T): bootstrap on truncation
+    rewards, term, trunc, next_v = [], [], [], []
+    for t, v_T in zip(trajs, last_v):
+        end = np.zeros(len(t.actions))
+        end[-1] = 1.0
+        rewards.append(end * t.success)            # r = 1 only on the step that succeeds
+        term.append(end * t.success)
+        trunc.append(end * (not t.success))
+        next_v.append(np.append(t.values[1:], v_T))
+    r, te, tr, nv = (np.concatenate(x)[:, None] for x in (rewards, term, trunc, next_v))
+    adv, ret = gae(r, values[:, None], te, tr, nv, cfg.gamma, cfg.gae_lambda)
+    return obs, actions, logp, adv[:, 0], ret[:, 0]
+
+
+# --------------------------------------------------------------------------------------------
+# sec 4.2: task expansion
+# --------------------------------------------------------------------------------------------
+
+def random_position(env, rng):
+    """A goal position drawn uniformly over the action grid: any x-bin, any layer."""
+    return position(int(rng.integers(len(env.x_bins))), int(rng.integers(len(env.y_bins))), env)
+
+
+def alter(goals, env, rng, restrict=True):
+    """One candidate task: exactly one alteration of `goals` (sec 4.2).
+
+    Add a goal for a block that has none, or modify the target of a block that has one, with the
+    block and the position uniform. Without the restriction ("w/o restriction", Table 3) the
+    candidate is an unrelated random task: uniform goal count, blocks and positions.
+    """
+    if not restrict:
+        m = int(rng.integers(1, env.n_blocks + 1))
+        return {int(b): random_position(env, rng) for b in rng.permutation(env.n_blocks)[:m]}
+    new = dict(goals)
+    free = [b for b in range(env.n_blocks) if b not in goals]
+    if free and rng.random() < 0.5:
+        new[int(rng.choice(free))] = random_position(env, rng)       # add one goal
+    else:
+        new[int(rng.choice(list(goals)))] = random_position(env, rng)  # modify one goal
+    return new
+
+
+def select_goal(agent, s0, sT, candidates, mode="ours"):
+    """Pick g* among candidate goals by the value function (equation 1 and its ablations).
+
+    ours:     argmax_g V(sT, g) - V(s0, g)   hard from the start, easy from where we ended
+    end2new:  argmax_g V(sT, g)              easy from where we ended (Table 3)
+    init2new: argmin_g V(s0, g)              hard from the start (Table 3)
+    Returns (index of g*, scores (K,)).
+    """
+    v_T = agent.value(np.stack([observation(sT, g) for g in candidates]))
+    v_0 = agent.value(np.stack([observation(s0, g) for g in candidates]))
+    scores = {"ours": v_T - v_0, "end2new": v_T, "init2new": -v_0}[mode]
+    return int(np.argmax(scores)), scores
+
+
+def join(first, second, goals, success):
+    """Concatenate two trajectories (second starts where first ended) under new goals."""
+    return Trajectory(goals, np.concatenate([first.states, second.states[1:]]),
+                      np.concatenate([first.actions, second.actions]), success)
+
+
+def relabel(traj, env):
+    """Hindsight relabelling: the goal becomes where the goal blocks came to rest.
+
+    Returns None when that is no usable demonstration: a block fell off the table, or the
+    relabelled goal already held at the start (nothing was achieved).
+    """
+    sT = traj.states[-1]
+    if not on_table(sT, env):
+        return None
+    goals = {b: (float(sT[b, 0]), float(sT[b, 1])) for b in traj.goals}
+    s0 = traj.states[0]
+    if all(np.hypot(s0[b, 0] - x, s0[b, 1] - y) < env.threshold for b, (x, y) in goals.items()):
+        return None
+    return Trajectory(goals, traj.states, traj.actions, True)
+
+
+def task_expansion(agent, tasks, cfg, envs, rng):
+    """One round of sec 4.2. tasks: the previous round's tasks. Returns (demos, info).
+
+    1. run the policy on the tasks and keep the successful trajectories s0 -> sT;
+    2. for each, draw K candidates with one alteration and pick g* by equation (1);
+    3. run the policy from sT toward g*; on success the joined trajectory demonstrates s0 -> g*,
+       on failure the joined trajectory is relabelled with the goal it did reach.
+    """
+    env = envs[0]
+    batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
+    trajs = [t for t in run_episodes(agent, batch, envs, rng, progress=Progress(None, "  collect"))
+             if t.success]
+    chosen = []
+    for t in trajs:
+        cands = [alter(t.goals, env, rng, cfg.restrict) for _ in range(cfg.candidates)]
+        i, _ = select_goal(agent, t.states[0], t.states[-1], cands, cfg.select)
+        chosen.append(cands[i])
+    ext = run_episodes(agent, [(t.states[-1], g) for t, g in zip(trajs, chosen)], envs, rng,
+                       progress=Progress(None, "  verify"))
+    demos, n_joined = [], 0
+    for t, g, e in zip(trajs, chosen, ext):
+        joined = join(t, e, g, e.success)
+        if e.success:
+            demos.append(joined)
+            n_joined += 1
+        else:
+            r = relabel(joined, env)
+            if r is not None:
+                demos.append(r)
+    info = dict(attempts=len(batch), successful=len(trajs), joined=n_joined,
+                relabelled=len(demos) - n_joined)
+    return demos, info
+
+
+def demo_arrays(demos):
+    """All (observation, action) pairs of a list of demonstrations: (N, n, 6), (N, 3)."""
+    return (np.concatenate([d.obs()[:-1] for d in demos]), np.concatenate([d.actions for d in demos]))
+
+
+def task_stats(demos, n_blocks):
+    """Figures 1 and 2 and Table 1 of the paper for one round's generated tasks."""
+    counts = [len(d.goals) for d in demos]
+    heights = [max(layer(y) for _, y in d.goals.values()) for d in demos]
+    high = [sum(layer(y) >= 1 for _, y in d.goals.values()) >= 3 for d in demos]
+    return dict(tasks=len(demos),
+                goal_count_hist=np.bincount(counts, minlength=n_blocks + 1)[1:].tolist(),
+                max_height_hist=np.bincount(heights, minlength=n_blocks)[:n_blocks].tolist(),
+                high_goal_tasks=int(np.sum(high)),
+                mean_episode_length=float(np.mean([len(d.actions) for d in demos])) if demos else 0.0)
+
+
+# --------------------------------------------------------------------------------------------
+# sec 5: evaluation
+# --------------------------------------------------------------------------------------------
+
+def eval_tasks(cfg, env, seed):
+    """Fixed evaluation tasks per shape: the same scenes after every round (own seed)."""
+    rng = np.random.default_rng([seed, 12345])
+    out = {}
+    for name in cfg.shapes:
+        out[name] = []
+        for _ in range(cfg.eval_episodes):
+            g = shape_goals(name, env, rng)
+            out[name].append((start_state(env, g, rng), g))
+    return out
+
+
+def evaluate(agent, tasks_by_shape, envs, rng):
+    """Zero-shot success per shape with the greedy policy: {shape: rate}."""
+    return {name: success_rate(run_episodes(agent, tasks, envs, rng, deterministic=True))
+            for name, tasks in tasks_by_shape.items()}
+
+
+# --------------------------------------------------------------------------------------------
+# The whole run
+# --------------------------------------------------------------------------------------------
+
+class Progress:
+    """A one-line progress report with rate and ETA on stderr (total None: just counts)."""
+
+    def __init__(self, total, label):
+        self.total, self.label, self.done, self.t0, self.last = total, label, 0, time.time(), 0.0
+
+    def update(self, k=1, extra=""):
+        self.done += k
+        now = time.time()
+        if now - self.last < 0.5 and (self.total is None or self.done < self.total):
+            return
+        self.last = now
+        el = now - self.t0
+        msg = f"\r{self.label}: {self.done}"
+        if self.total:
+            eta = el / max(self.done, 1) * max(self.total - self.done, 0)
+            msg += f"/{self.total} ({100 * min(self.done / self.total, 1):.0f}%) {el:.0f}s, ETA {eta:.0f}s"
+        else:
+            msg += f" steps, {el:.0f}s"
+        print(msg + ("  " + extra if extra else ""), end="", file=sys.stderr, flush=True)
+
+    def close(self):
+        print(file=sys.stderr, flush=True)
+
+
+def save_json(path, obj):
+    """Write JSON atomically: a run killed mid-write leaves the previous file intact."""
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(obj, f, indent=1)
+    os.replace(tmp, path)
+
+
+def run(cfg, out_dir, log=print):
+    """Train the base policy, run cfg.rounds rounds, evaluate after each. Returns results dict."""
+    os.makedirs(out_dir, exist_ok=True)
+    rng = np.random.default_rng(cfg.seed)
+    envs = [BlockWorld(cfg.n_blocks, max_steps=cfg.max_steps) for _ in range(cfg.n_envs)]
+    agent = Agent(cfg.n_blocks, n_x=len(envs[0].x_bins), hidden=cfg.hidden, seed=cfg.seed)
+    clock, t_start = {}, time.time()
+    results = dict(config=asdict(cfg), rounds=[], wallclock=clock)
+    evals = eval_tasks(cfg, envs[0], cfg.seed)
+
+    def finish_round(k, stats, t0):
+        ev = evaluate(agent, evals, envs, rng)
+        agent.save(os.path.join(out_dir, f"round{k}.npz"))
+        results["rounds"].append(dict(round=k, eval=ev, **stats))
+        clock[f"round{k}_s"] = round(time.time() - t0, 1)
+        clock["total_s"] = round(time.time() - t_start, 1)
+        save_json(os.path.join(out_dir, "results.json"), results)
+        log(f"round {k}: zero-shot " + ", ".join(f"{s} {v:.0%}" for s, v in ev.items())
+            + f"  ({clock['total_s']:.0f}s so far)")
+
+    # sec 4.1 -- base skills
+    t0 = time.time()
+    log(f"[round 0] base skills: {cfg.base_demos} single-block demos, BC, PPO")
+    p = Progress(cfg.base_demos, "  demos")
+    base_tasks, obs, actions = base_demos(cfg, envs[0], rng, cfg.base_demos, p)
+    p.close()
+    bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
+    log(f"  BC loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
+    ppo_log = ppo_phase(agent, base_tasks, cfg, envs, rng, "  PPO base")
+    finish_round(0, dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log]), t0)
+
+    buffer_obs, buffer_act = obs, actions          # demos kept for self-distillation
+    all_tasks, prev_tasks = list(base_tasks), base_tasks
+    eval_list = [t for ts in evals.values() for t in ts]
+    for k in range(1, cfg.rounds + 1):
+        t0 = time.time()
+        if cfg.baseline == "direct-ppo":             # sec 5.3: no expansion, PPO on the test tasks
+            log(f"[round {k}] direct PPO on the evaluation tasks")
+            ppo_log = ppo_phase(agent, eval_list, cfg, envs, rng, "  PPO direct")
+            finish_round(k, dict(ppo_success=[m["success"] for m in ppo_log]), t0)
+            continue
+        log(f"[round {k}] task expansion from {len(prev_tasks)} tasks")
+        demos, info = task_expansion(agent, prev_tasks, cfg, envs, rng)
+        stats = task_stats(demos, cfg.n_blocks)
+        log(f"  {info['successful']}/{info['attempts']} successful, {info['joined']} joined, "
+            f"{info['relabelled']} relabelled; {stats['high_goal_tasks']} tasks with >= 3 high goals")
+        if not demos:
+            log("  no demonstrations generated; keeping the current policy")
+            finish_round(k, dict(expansion=info, **stats), t0)
+            continue
+        # sec 4.3 -- self-distillation on the new demos mixed with the old (bounded buffer)
+        new_obs, new_act = demo_arrays(demos)
+        buffer_obs = np.concatenate([buffer_obs, new_obs])[-cfg.buffer_size:]
+        buffer_act = np.concatenate([buffer_act, new_act])[-cfg.buffer_size:]
+        bc_loss = agent.bc(buffer_obs, buffer_act, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
+        log(f"  BC on {len(buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
+        new_tasks = [(d.states[0], d.goals) for d in demos]
+        old = [all_tasks[i] for i in rng.integers(len(all_tasks), size=len(new_tasks))]
+        ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, rng, "  PPO distil")
+        all_tasks = (all_tasks + new_tasks)[-cfg.buffer_size:]
+        prev_tasks = new_tasks
+        finish_round(k, dict(expansion=info, bc_loss=bc_loss,
+                             ppo_success=[m["success"] for m in ppo_log], **stats), t0)
+    return results
+
+
+# --------------------------------------------------------------------------------------------
+# Reports: Tables 1 and 2 as markdown, Figures 1 and 2 as PNG
+# --------------------------------------------------------------------------------------------
+
+def tables(results):
+    """Table 1 (generated tasks per round) and Table 2 (zero-shot success) as markdown."""
+    rounds = results["rounds"]
+    shapes = list(rounds[0]["eval"])
+    t1 = ["| round | generated tasks | # high goals (>= 3 above ground) | mean episode length |",
+          "|---|---|---|---|"]
+    t1 += [f"| {r['round']} | {r['tasks']} | {r['high_goal_tasks']} | {r['mean_episode_length']:.2f} |"
+           for r in rounds if "tasks" in r]
+    t2 = ["| round | " + " | ".join(shapes) + " |", "|---" * (len(shapes) + 1) + "|"]
+    t2 += [f"| {r['round']} | " + " | ".join(f"{100 * r['eval'][s]:.0f}%" for s in shapes) + " |"
+           for r in rounds]
+    return "\n".join(["Table 1: generated tasks", *t1, "", "Table 2: zero-shot success", *t2])
+
+
+def figures(results, out_dir):
+    """Figure 1 (maximum goal height) and Figure 2 (number of goals) per round, as PNG files."""
+    from matplotlib.figure import Figure
+    rounds = [r for r in results["rounds"] if "tasks" in r]
+    paths = []
+    for key, fname, xlabel in (("max_height_hist", "fig1_max_goal_height.png", "highest goal (layer, 0 = table)"),
+                               ("goal_count_hist", "fig2_goal_count.png", "number of goals")):
+        fig = Figure(figsize=(5, 3.2))
+        ax = fig.add_subplot()
+        width = 0.8 / max(len(rounds), 1)
+        for i, r in enumerate(rounds):
+            h = np.array(r[key], float)
+            ax.bar(np.arange(len(h)) + (1 if key == "goal_count_hist" else 0) + i * width, h / max(h.sum(), 1),
+                   width, label=f"round {r['round']}")
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel("fraction of generated tasks")
+        ax.legend()
+        fig.tight_layout()
+        paths.append(os.path.join(out_dir, fname))
+        fig.savefig(paths[-1], dpi=100)
+    return paths
+
+
+def parse_args(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0],
+                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    d = Config()
+    p.add_argument("--rounds", type=int, default=d.rounds, help="rounds of task expansion (>= 1)")
+    p.add_argument("--seed", type=int, default=d.seed)
+    p.add_argument("--out", default=None, help="output directory (default runs/<settings>)")
+    p.add_argument("--select", choices=["ours", "end2new", "init2new"], default=d.select,
+                   help="goal selection rule (equation 1 and the Table 3 ablations)")
+    p.add_argument("--no-restrict", action="store_true",
+                   help="candidates are unrelated random tasks instead of one alteration (Table 3)")
+    p.add_argument("--baseline", choices=["direct-ppo"], default=None,
+                   help="skip task expansion; PPO directly on the evaluation tasks (sec 5.3)")
+    p.add_argument("--scale", type=float, default=1.0,
+                   help="multiply every data and step budget (e.g. 0.05 for a smoke test)")
+    a = p.parse_args(argv)
+    if a.rounds < 1:
+        p.error(f"--rounds must be >= 1, got {a.rounds}")
+    if not 0 < a.scale <= 100:
+        p.error(f"--scale must be in (0, 100], got {a.scale}")
+    cfg = Config(seed=a.seed, rounds=a.rounds, select=a.select, restrict=not a.no_restrict,
+                 baseline=a.baseline or "")
+    if a.scale != 1.0:
+        for name in ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes"):
+            setattr(cfg, name, max(4, int(round(getattr(cfg, name) * a.scale))))
+    tag = a.baseline or f"{a.select}{'-norestrict' if a.no_restrict else ''}"
+    out = a.out or os.path.join("runs", f"{tag}-seed{a.seed}")
+    if os.path.exists(os.path.join(out, "results.json")):
+        p.error(f"{out} already holds a run (results.json); choose another --out or delete it")
+    return cfg, out
+
+
+def main(argv=None):
+    cfg, out = parse_args(argv)
+    with threadpool_limits(limits=1):
+        results = run(cfg, out)
+    print()
+    print(tables(results))
+    for path in figures(results, out):
+        print("wrote", path)
+    print(f"wrote {out}/results.json and round0..{cfg.rounds}.npz in {results['wallclock']['total_s']:.0f}s")
+
+
+if __name__ == "__main__":
+    main()

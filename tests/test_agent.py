@@ -1,0 +1,326 @@
+"""Tests of agent.py: every backward pass against central finite differences, GAE against a
+plain reference, numerical stability, sampling, the Agent API, persistence, and learning."""
+import numpy as np
+import pytest
+
+from agent import (MLP, ActionDist, Adam, Agent, SetNet, bc_loss, clip_grad_norm, entropy_of,
+                   featurize, gae, log_softmax, ppo_loss, value_loss)
+
+EPS, TOL = 1e-6, 1e-5
+
+
+def rel_err(a, b):
+    return np.linalg.norm(a - b) / max(np.linalg.norm(a) + np.linalg.norm(b), 1e-12)
+
+
+def numerical_grad(f, x, eps=EPS):
+    """Central differences of the scalar f() w.r.t. every entry of the array x (in place)."""
+    g = np.zeros_like(x)
+    for i in np.ndindex(x.shape):
+        old = x[i]
+        x[i] = old + eps
+        fp = f()
+        x[i] = old - eps
+        fm = f()
+        x[i] = old
+        g[i] = (fp - fm) / (2 * eps)
+    return g
+
+
+def random_obs(rng, B, n=6, goals=1):
+    """B observations: blocks on the table at random x, `goals` random blocks with goals."""
+    obs = np.zeros((B, n, 6))
+    obs[..., 0] = rng.uniform(-0.45, 0.45, (B, n))
+    obs[..., 1] = 0.025 + 0.05 * rng.integers(0, 2, (B, n))
+    for k in range(B):
+        for b in rng.choice(n, goals, replace=False):
+            obs[k, b, 3:] = rng.uniform(-0.45, 0.45), 0.025 + 0.05 * rng.integers(n), 1.0
+    return obs
+
+
+# ----------------------------------------------------------------------------- gradients
+
+def test_mlp_backward_matches_finite_differences():
+    rng = np.random.default_rng(0)
+    net = MLP([5, 7, 6, 3], seed=1, out_scale=0.5)
+    x, R = rng.standard_normal((4, 5)), rng.standard_normal((4, 3))
+    loss = lambda: np.sum(net.forward(x) * R)
+    net.forward(x)
+    grads = net.backward(R)
+    for k, p in net.params.items():
+        assert rel_err(grads[k], numerical_grad(loss, p)) < TOL, k
+    assert rel_err(net.dx, numerical_grad(loss, x)) < TOL
+
+
+def test_mlp_init_scales():
+    net = MLP([400, 300, 50], seed=0, out_scale=0.01)
+    assert abs(net.params["W0"].std() - 1 / np.sqrt(400)) < 0.01 / np.sqrt(400) * 5
+    assert abs(net.params["W1"].std() - 0.01 / np.sqrt(300)) < 0.0005 / np.sqrt(300) * 5
+    assert not net.params["b0"].any() and not net.params["b1"].any()
+
+
+def test_setnet_backward_matches_finite_differences_including_max_pool():
+    rng = np.random.default_rng(1)
+    net = SetNet(7, 6, 5, seed=2)
+    f, R = rng.standard_normal((3, 4, 7)), rng.standard_normal((3, 4, 5))
+    loss = lambda: np.sum(net.forward(f) * R)
+    net.forward(f)
+    assert len(np.unique(net.argmax)) > 1                     # max routes to several blocks
+    grads = net.backward(R)
+    assert set(grads) == set(net.params)
+    for k, p in net.params.items():
+        assert rel_err(grads[k], numerical_grad(loss, p)) < TOL, k
+
+
+def action_setup(seed=3, B=6, n=4, n_x=7, n_y=3, scale=2.0):
+    rng = np.random.default_rng(seed)
+    out = scale * rng.standard_normal((B, n, 1 + n_x + n_y))
+    actions = np.stack([rng.integers(n, size=B), rng.integers(n_x, size=B), rng.integers(n_y, size=B)], 1)
+    return rng, out, actions, n_x
+
+
+def test_logprob_entropy_backward_matches_finite_differences():
+    rng, out, actions, n_x = action_setup()
+    a, c = rng.standard_normal(len(out)), rng.standard_normal(len(out))
+    f = lambda: np.sum(a * ActionDist(out, n_x).log_prob(actions) + c * ActionDist(out, n_x).entropy())
+    dout = ActionDist(out, n_x).backward(actions, a, c)
+    assert rel_err(dout, numerical_grad(f, out)) < TOL
+
+
+def test_entropy_is_exact_sum_over_joint_actions():
+    _, out, _, n_x = action_setup(B=2, n=3, n_x=4, n_y=2)
+    dist = ActionDist(out, n_x)
+    joint = np.array(np.meshgrid(range(3), range(4), range(2), indexing="ij")).reshape(3, -1).T
+    for k in range(2):
+        lp = ActionDist(np.repeat(out[k:k + 1], len(joint), 0), n_x).log_prob(joint)
+        assert abs(np.exp(lp).sum() - 1) < 1e-12
+        assert abs(-(np.exp(lp) * lp).sum() - dist.entropy()[k]) < 1e-12
+
+
+def test_bc_loss_backward():
+    _, out, actions, n_x = action_setup(seed=4)
+    L, dout = bc_loss(out, actions, n_x)
+    assert rel_err(dout, numerical_grad(lambda: bc_loss(out, actions, n_x)[0], out)) < TOL
+
+
+def test_ppo_loss_backward_with_clipped_and_unclipped_ratios():
+    rng, out, actions, n_x = action_setup(seed=5, B=16)
+    logp = ActionDist(out, n_x).log_prob(actions)
+    logp_old = logp + rng.uniform(-0.5, 0.5, len(out))
+    adv = rng.standard_normal(len(out))
+    _, dout, info = ppo_loss(out, actions, logp_old, adv, n_x, clip=0.2, ent_coef=0.03)
+    r = info["ratio"]
+    clipped = np.where(adv > 0, r > 1.2, r < 0.8)             # these get no surrogate gradient
+    assert clipped.any() and (~clipped).any() and (np.abs(r - 1) > 0.2).sum() > clipped.sum()
+    f = lambda: ppo_loss(out, actions, logp_old, adv, n_x, clip=0.2, ent_coef=0.03)[0]
+    assert rel_err(dout, numerical_grad(f, out)) < TOL
+
+
+def test_value_loss_backward():
+    rng = np.random.default_rng(6)
+    out, R = rng.standard_normal((5, 4, 1)), rng.standard_normal(5)
+    L, dout, V = value_loss(out, R)
+    assert np.allclose(V, out[..., 0].mean(1)) and np.isclose(L, 0.5 * np.mean((V - R) ** 2))
+    assert rel_err(dout, numerical_grad(lambda: value_loss(out, R)[0], out)) < TOL
+
+
+def test_agent_bc_gradient_through_features_and_setnet():
+    rng = np.random.default_rng(7)
+    agent = Agent(n_blocks=4, n_x=9, hidden=8, seed=1)
+    obs, acts = random_obs(rng, 5, n=4), np.stack([rng.integers(4, size=5), rng.integers(9, size=5),
+                                                   rng.integers(4, size=5)], 1)
+    f = agent.features(obs)
+    loss = lambda: bc_loss(agent.actor.forward(f), acts, 9)[0]
+    grads = agent.actor.backward(bc_loss(agent.actor.forward(f), acts, 9)[1])
+    for k in ("phi.W0", "rho.W1", "rho.b0"):
+        assert rel_err(grads[k], numerical_grad(loss, agent.actor.params[k])) < TOL, k
+
+
+# ----------------------------------------------------------------------------- GAE
+
+def gae_reference(r, v, term, trunc, nv, gamma, lam):
+    """A_t = sum_l (gamma lam)^l delta_{t+l}, summed up to and including the episode's last step."""
+    T, N = r.shape
+    adv = np.zeros((T, N))
+    for n in range(N):
+        for t in range(T):
+            total, discount = 0.0, 1.0
+            for u in range(t, T):
+                delta = r[u, n] + gamma * nv[u, n] * (1 - term[u, n]) - v[u, n]
+                total += discount * delta
+                if term[u, n] or trunc[u, n]:
+                    break
+                discount *= gamma * lam
+            adv[t, n] = total
+    return adv
+
+
+def test_gae_matches_reference_with_terminations_and_truncations():
+    rng = np.random.default_rng(8)
+    T, N = 15, 3
+    r, v, nv = rng.random((T, N)), rng.standard_normal((T, N)), rng.standard_normal((T, N))
+    term, trunc = np.zeros((T, N)), np.zeros((T, N))
+    term[[3, 9], [0, 1]] = 1
+    trunc[[5, 11, 6], [0, 2, 1]] = 1
+    adv, ret = gae(r, v, term, trunc, nv, 0.97, 0.9)
+    assert np.allclose(adv, gae_reference(r, v, term, trunc, nv, 0.97, 0.9), atol=1e-12)
+    assert np.allclose(ret, adv + v)
+    # termination ignores next_values; truncation bootstraps from them
+    assert np.isclose(adv[3, 0], r[3, 0] - v[3, 0])
+    assert np.isclose(adv[5, 0], r[5, 0] + 0.97 * nv[5, 0] - v[5, 0])
+    with pytest.raises(ValueError):
+        gae(r, v, term, trunc, nv[:-1], 0.97, 0.9)
+
+
+# ----------------------------------------------------------------------------- stability, sampling
+
+def test_log_softmax_and_entropy_stable_for_extreme_logits():
+    z = np.array([[1e4, -1e4, 0.0, 3.0], [-1e4, -1e4, -1e4, -1e4], [1e4, 1e4, -1e4, 0.0]])
+    lp = log_softmax(z)
+    H = entropy_of(lp)
+    assert np.isfinite(lp).all() and np.isfinite(H).all() and (H >= 0).all() and (lp <= 0).all()
+    assert np.allclose(H, [0.0, np.log(4), np.log(2)])
+    dist = ActionDist(np.array([[[1e4, -1e4, 1e4, 0], [-1e4, 1e4, -1e4, 1e4]]]), 2)
+    assert np.isfinite(dist.entropy()).all() and np.isfinite(dist.backward([[0, 1, 0]], 1.0, 1.0)).all()
+    m = np.random.default_rng(9).standard_normal((5, 8)) * 3           # moderate: naive formula is fine
+    p = np.exp(m) / np.exp(m).sum(-1, keepdims=True)
+    assert np.allclose(log_softmax(m), np.log(p)) and np.allclose(entropy_of(log_softmax(m)), -(p * np.log(p)).sum(-1))
+
+
+def test_sampling_frequencies_match_probabilities_and_mode_is_joint_argmax():
+    rng, out, _, n_x = action_setup(seed=10, B=1, n=3, n_x=4, n_y=2, scale=1.0)
+    joint = np.array(np.meshgrid(range(3), range(4), range(2), indexing="ij")).reshape(3, -1).T
+    p = np.exp(ActionDist(np.repeat(out, len(joint), 0), n_x).log_prob(joint))
+    M = 50000
+    samples = ActionDist(np.repeat(out, M, 0), n_x).sample(np.random.default_rng(0))
+    counts = np.zeros(len(joint))
+    np.add.at(counts, (samples[:, 0] * 4 + samples[:, 1]) * 2 + samples[:, 2], 1)
+    chi2 = np.sum((counts - M * p) ** 2 / (M * p))
+    assert chi2 < 60                                          # df = 23: P(chi2 > 60) < 1e-4
+    assert tuple(ActionDist(out, n_x).mode()[0]) == tuple(joint[p.argmax()])
+
+
+# ----------------------------------------------------------------------------- features, API
+
+def test_featurize_codes():
+    obs = np.zeros((1, 3, 6))
+    obs[0, :, :2] = [[0.0, 0.025], [0.2, 0.075], [-0.3, 0.025]]
+    obs[0, 0, 3:] = [0.005, 0.025, 1.0]                         # satisfied (0.5 cm away)
+    obs[0, 1, 3:] = [-0.2, 0.125, 1.0]                          # not satisfied
+    f = featurize(obs, n_y=3)
+    assert f.shape == (1, 3, 10 + 2 * 3 + 2 * 21)
+    assert list(f[0, :, 9]) == [1, 0, 0]                        # satisfied flag
+    assert np.array_equal(f[0, :, 10:13], np.eye(3)[[0, 1, 0]])  # current layer one-hot
+    assert np.array_equal(f[0, :, 13:16], [[1, 0, 0], [0, 0, 1], [0, 0, 0]])  # goal layer, no goal -> 0
+    assert not f[0, 2, 4:10].any() and not f[0, 2, 16 + 21:].any()
+    assert f[0, 1, 16:37].argmax() == 14 and f[0, 1, 37:].argmax() == 6   # RBF centres every 5 cm
+
+
+def test_act_value_sample_shapes_and_errors():
+    rng = np.random.default_rng(11)
+    agent = Agent(hidden=16, seed=0)
+    obs = random_obs(rng, 5)
+    a1 = agent.act(obs[0], rng=rng)
+    assert a1.shape == (3,) and a1.dtype == np.int64 and (0 <= a1).all() and (a1 < [6, 37, 6]).all()
+    ab = agent.act(obs, deterministic=True)
+    assert ab.shape == (5, 3) and np.array_equal(agent.act(obs[2], deterministic=True), ab[2])
+    assert isinstance(agent.value(obs[0]), float) and agent.value(obs).shape == (5,)
+    actions, logp, values = agent.sample(obs.astype(np.float32), rng)
+    assert actions.shape == (5, 3) and logp.shape == (5,) and np.allclose(values, agent.value(obs))
+    assert np.all(logp < 0)
+    twin = Agent(hidden=16, seed=0)                             # no rng: the agent's own, seeded
+    assert np.array_equal([agent.act(o) for o in obs], [twin.act(o) for o in obs])
+    assert agent.act(np.zeros((6, 6), np.float32)).shape == (3,)
+    with pytest.raises(ValueError):
+        agent.act(np.zeros((4, 6)), deterministic=True)         # wrong number of blocks
+    with pytest.raises(ValueError):
+        agent.bc(obs, np.array([[0, 37, 0]] * 5), 1, 4, 1e-3, rng)   # x-bin out of range
+
+
+def test_adam_and_clip_grad_norm():
+    p = {"w": np.ones(3)}
+    opt = Adam(p, lr=0.1)
+    opt.step({"w": np.array([5.0, -0.01, 1e3])})
+    assert np.allclose(p["w"], [0.9, 1.1, 0.9])                # bias-corrected first step = lr sign(g)
+    g, norm = clip_grad_norm({"a": np.array([3.0]), "b": np.array([4.0])}, 1.0)
+    assert norm == 5.0 and np.isclose(np.sqrt(g["a"] ** 2 + g["b"] ** 2), 1.0)
+    g2, _ = clip_grad_norm({"a": np.array([0.3])}, 1.0)
+    assert g2["a"][0] == 0.3
+
+
+# ----------------------------------------------------------------------------- persistence
+
+def test_save_load_round_trip_and_byte_identical(tmp_path):
+    rng = np.random.default_rng(12)
+    obs = random_obs(rng, 4)
+    a, b = Agent(hidden=16, seed=3), Agent(hidden=16, seed=3)
+    a.bc(obs, a.act(obs, deterministic=True), 2, 2, 1e-3, np.random.default_rng(0))
+    b.bc(obs, b.act(obs, deterministic=True), 2, 2, 1e-3, np.random.default_rng(0))
+    a.save(tmp_path / "a.npz")
+    b.save(tmp_path / "b.npz")
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    c = Agent.load(tmp_path / "a.npz")
+    f = a.features(obs)
+    assert np.array_equal(a.actor.forward(f), c.actor.forward(f))
+    assert np.array_equal(a.value(obs), c.value(obs))
+    assert (c.n_blocks, c.n_x, c.n_y, c.hidden) == (6, 37, 6, 16)
+    Agent(hidden=16, seed=4).save(tmp_path / "d.npz")
+    assert (tmp_path / "a.npz").read_bytes() != (tmp_path / "d.npz").read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.npz", "b.npz", "d.npz"]   # no tmp left
+
+
+def test_load_rejects_bad_files(tmp_path):
+    good = tmp_path / "good.npz"
+    Agent(hidden=8).save(good)
+    data = dict(np.load(good))
+    cases = {"truncated.npz": good.read_bytes()[: len(good.read_bytes()) // 2], "garbage.npz": b"not a zip"}
+    for name, content in cases.items():
+        (tmp_path / name).write_bytes(content)
+    np.savez(tmp_path / "version.npz", **{**data, "format_version": np.array(99)})
+    np.savez(tmp_path / "sizes.npz", **{**data, "sizes": np.array([6, 37, 6, 16])})
+    np.savez(tmp_path / "shape.npz", **{**data, "actor.rho.W1": np.zeros((8, 5))})
+    np.savez(tmp_path / "missing.npz", **{k: v for k, v in data.items() if k != "critic.phi.b0"})
+    for name, msg in [("truncated.npz", "readable"), ("garbage.npz", "readable"), ("version.npz", "99"),
+                      ("sizes.npz", "sizes"), ("shape.npz", "actor.rho.W1"), ("missing.npz", "critic.phi.b0")]:
+        with pytest.raises(ValueError, match=msg) as e:
+            Agent.load(tmp_path / name)
+        assert name in str(e.value)
+
+
+# ----------------------------------------------------------------------------- learning
+
+def copy_goal_task(rng, N, agent):
+    """Move the single goal block to its goal's (x-bin, layer): the action is read off the goal."""
+    obs = random_obs(rng, N)
+    b = obs[..., 5].argmax(1)
+    goal = obs[np.arange(N), b]
+    x_bins = np.linspace(-0.45, 0.45, agent.n_x)
+    acts = np.stack([b, np.abs(goal[:, 3:4] - x_bins).argmin(1), np.round(goal[:, 4] / 0.05 - 0.5)], 1)
+    return obs, acts.astype(np.int64)
+
+
+def test_bc_learns_to_copy_the_goal():
+    rng = np.random.default_rng(13)
+    agent = Agent(hidden=64, seed=0)
+    obs, acts = copy_goal_task(rng, 1024, agent)
+    losses = agent.bc(obs, acts, epochs=30, batch_size=64, lr=3e-3, rng=rng)   # 480 steps
+    assert losses[0] > 5 and losses[-1] < losses[0] / 10, losses
+    test_obs, test_acts = copy_goal_task(rng, 200, agent)
+    assert np.mean(np.all(agent.act(test_obs, deterministic=True) == test_acts, 1)) > 0.7
+
+
+def test_ppo_update_raises_advantaged_action_and_fit_value():
+    rng = np.random.default_rng(14)
+    agent = Agent(hidden=16, seed=0)
+    obs = random_obs(rng, 64)
+    actions, logp, values = agent.sample(obs, rng)
+    adv = np.where(actions[:, 0] == 0, 1.0, -0.2)               # block 0 is good
+    m = agent.ppo_update(obs, actions, logp, adv, values + adv, epochs=4, minibatch=16, clip=0.2,
+                         ent_coef=0.01, vf_coef=0.5, lr=1e-3, max_grad_norm=0.5, rng=rng)
+    change = ActionDist(agent.actor.forward(agent.features(obs)), 37).log_prob(actions) - logp
+    assert (change[adv > 0] > 0).all() and change[adv > 0].mean() > 0.03 and change[adv < 0].mean() < 0
+    assert set(m) == {"policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac", "explained_variance"}
+    assert all(np.isfinite(v) for v in m.values()) and m["approx_kl"] >= 0 and 0 <= m["clip_frac"] <= 1
+    target = obs[..., 5].sum(1) * 0.5 + obs[:, 0, 0]
+    losses = agent.fit_value(obs, target, epochs=30, batch_size=16, lr=3e-3, rng=rng)
+    assert losses[-1] < losses[0] / 10

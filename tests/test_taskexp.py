@@ -1,0 +1,127 @@
+"""Tests of the pipeline: task sampling, goal selection, relabelling, shapes, and the CLI end to end."""
+import json
+import os
+
+import numpy as np
+import pytest
+
+import taskexp
+from agent import Agent
+from env2d import BLOCK_H, BlockWorld, is_success
+
+
+@pytest.fixture
+def env():
+    return BlockWorld(6)
+
+
+def test_alter_makes_exactly_one_alteration_and_both_kinds(env):
+    rng = np.random.default_rng(0)
+    goals = {0: (0.1, 0.025), 3: (-0.2, 0.075)}
+    kinds = set()
+    for _ in range(300):
+        new = taskexp.alter(goals, env, rng)
+        added = set(new) - set(goals)
+        changed = [b for b in goals if new[b] != goals[b]]
+        assert set(goals) <= set(new)
+        assert len(added) + len(changed) == 1, (goals, new)
+        kinds.add("add" if added else "modify")
+    assert kinds == {"add", "modify"}
+
+
+def test_alter_without_restriction_draws_unrelated_tasks(env):
+    rng = np.random.default_rng(1)
+    counts = {len(taskexp.alter({0: (0.0, 0.025)}, env, rng, restrict=False)) for _ in range(300)}
+    assert counts == set(range(1, env.n_blocks + 1))
+
+
+class FixedValues:
+    """A stand-in critic: V(s, g) read from a table keyed by (state id, candidate id)."""
+
+    def __init__(self, v0, vT):
+        self.v = {0: np.array(v0), 1: np.array(vT)}
+
+    def value(self, obs):
+        which = int(obs[0][0, 0])            # the state id is planted in block 0's x
+        return self.v[which]
+
+
+def test_select_goal_equation_1_and_ablations():
+    s0, sT = np.zeros((6, 6)), np.ones((6, 6))
+    cands = [{1: (0.0, 0.025)}] * 3
+    agent = FixedValues(v0=[0.9, 0.1, 0.5], vT=[1.0, 0.6, 0.95])
+    # ours: V(sT)-V(s0) = [0.1, 0.5, 0.45]; end2new: V(sT); init2new: -V(s0)
+    assert taskexp.select_goal(agent, s0, sT, cands, "ours")[0] == 1
+    assert taskexp.select_goal(agent, s0, sT, cands, "end2new")[0] == 0
+    assert taskexp.select_goal(agent, s0, sT, cands, "init2new")[0] == 1
+    agent = FixedValues(v0=[0.9, 0.3, 0.2], vT=[1.0, 0.6, 0.95])
+    assert taskexp.select_goal(agent, s0, sT, cands, "init2new")[0] == 2
+
+
+def test_relabel_uses_reached_positions(env):
+    states = np.zeros((3, 6, 6))
+    states[:, :, 1] = BLOCK_H / 2
+    states[:, :, 0] = np.linspace(-0.4, 0.4, 6)
+    states[2, 2, :2] = (0.3, 1.5 * BLOCK_H)          # block 2 moved, onto something
+    traj = taskexp.Trajectory({2: (0.0, 0.3)}, states, np.zeros((2, 3), int), False)
+    r = taskexp.relabel(traj, env)
+    assert r.success and r.goals == {2: (0.3, 1.5 * BLOCK_H)}
+    assert is_success(r.states[-1], r.goals) and not is_success(r.states[0], r.goals)
+    traj = taskexp.Trajectory({0: (0.3, 0.3)}, states, np.zeros((2, 3), int), False)
+    assert taskexp.relabel(traj, env) is None        # block 0 never moved: nothing achieved
+
+
+@pytest.mark.parametrize("name", list(taskexp.SHAPES))
+def test_shapes_are_held_out_and_buildable(env, name):
+    rng = np.random.default_rng(2)
+    for _ in range(5):
+        goals = taskexp.shape_goals(name, env, rng)
+        high = [b for b, (_, y) in goals.items() if taskexp.layer(y) >= 1]
+        assert len(goals) >= 4 and len(high) >= 3
+        obs, _ = env.reset(seed=int(rng.integers(1000)), options={"goals": goals})
+        # build bottom-up by hand; the finished shape must stand and count as success
+        for b, (x, y) in sorted(goals.items(), key=lambda kv: kv[1][1]):
+            obs, reward, terminated, truncated, info = env.step(env.encode_action(b, x, y))
+            assert not info["noop"], (name, goals, b)
+        assert reward == 1.0 and terminated, (name, goals, env.get_state()[:, :2])
+
+
+def run_cli(tmp_path, *extra):
+    out = str(tmp_path / "run")
+    taskexp.main(["--rounds", "1", "--scale", "0.02", "--out", out, *extra])
+    with open(os.path.join(out, "results.json")) as f:
+        return out, json.load(f)
+
+
+def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
+    out, res = run_cli(tmp_path)
+    assert [r["round"] for r in res["rounds"]] == [0, 1]
+    assert set(res["rounds"][1]["eval"]) == {"I", "Y", "3T"}
+    for k in (0, 1):
+        agent = Agent.load(os.path.join(out, f"round{k}.npz"))
+        assert agent.act(np.zeros((6, 6), np.float32)).shape == (3,)
+    printed = capsys.readouterr().out
+    assert "Table 1" in printed and "Table 2" in printed
+    assert os.path.exists(os.path.join(out, "fig1_max_goal_height.png"))
+
+
+def test_same_seed_same_results_different_seed_different(tmp_path):
+    runs = [run_cli(tmp_path / name, "--seed", seed) for name, seed in (("a", "3"), ("b", "3"), ("c", "4"))]
+    strip = [{k: v for k, v in r.items() if k != "wallclock"} for _, r in runs]
+    files = [open(os.path.join(out, "round1.npz"), "rb").read() for out, _ in runs]
+    assert strip[0] == strip[1] and files[0] == files[1]
+    assert files[0] != files[2]
+
+
+@pytest.mark.parametrize("argv", [["--rounds", "0"], ["--select", "best"], ["--scale", "-1"]])
+def test_cli_refuses_bad_arguments(argv, capsys):
+    with pytest.raises(SystemExit):
+        taskexp.parse_args(argv)
+    assert "error" in capsys.readouterr().err
+
+
+def test_cli_refuses_to_overwrite_a_run(tmp_path, capsys):
+    (tmp_path / "results.json").write_text("{}")
+    with pytest.raises(SystemExit):
+        taskexp.parse_args(["--out", str(tmp_path)])
+    assert "already holds a run" in capsys.readouterr().err
