@@ -88,7 +88,7 @@ def clip_grad_norm(grads, max_norm):
 # ---- Features and the set network (sec 3: one shared network per block, pooled context) ----
 
 def featurize(obs, n_y=None, block_size=(0.10, 0.05), table_x=(-0.5, 0.5), threshold=0.02):
-    """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, 10 + 2 n_y + 2 N_RBF).
+    """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, 15 + 2 n_y + 3 N_RBF).
 
     Besides normalised pose, goal and offset to goal, each block gets one-hot codes of its layer
     and goal layer and RBF codes of its x and goal x.  Mean/max pooling of their embeddings then
@@ -108,11 +108,37 @@ def featurize(obs, n_y=None, block_size=(0.10, 0.05), table_x=(-0.5, 0.5), thres
     onehot = lambda k: np.eye(n_y)[k]                                   # (B, n) -> (B, n, n_y)
     centres = np.linspace(table_x[0], table_x[1], N_RBF)
     rbf = lambda v: np.exp(-0.5 * ((v[..., None] - centres) / (w / 4)) ** 2)
+    sat = g * (dist < threshold)
     cols = [(x - mid) / half, y / (n_y * h), np.cos(ang), np.sin(ang), g,
-            g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h,
-            g * (dist < threshold)]
+            g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h, sat]
+    rel, needs_support = relations(x, y, gx, gy, g, sat, w, h)
     return np.concatenate([np.stack(cols, -1), onehot(layer(y)), g[..., None] * onehot(layer(gy)),
-                           rbf(x), g[..., None] * rbf(gx)], axis=-1)
+                           rbf(x), g[..., None] * rbf(gx), rel, needs_support[..., None] * rbf(gx)],
+                          axis=-1)
+
+
+def relations(x, y, gx, gy, g, sat, w, h):
+    """Pairwise facts about blocks and goals, pooled over the other blocks j (what attention finds).
+
+    All inputs (B, n).  Returns rel (B, n, 5) and needs_support (B, n):
+      blocked     another block overlaps my goal spot now (placing me there would be a no-op)
+      supported   my goal is on the table, or another block rests right under my goal spot now
+      wait        another unreached goal lies under mine: that block must go first
+      first       my goal lies under another block's goal: I am its support
+      covered     a block rests on me now
+    needs_support = has goal, not reached, not supported: a free block must go under it, and
+    the RBF code of its goal x (pooled) tells the free blocks where.
+    """
+    other = 1.0 - np.eye(x.shape[1])                                   # (n, n): j != i
+    near = lambda a, b, tol: (np.abs(a[:, None, :] - b[:, :, None]) < tol)    # (B, i, j): |a_j - b_i|
+    any_j = lambda m: (m * other).max(-1)
+    blocked = g * any_j(near(x, gx, w * 0.95) & near(y, gy, h * 0.95))
+    supported = g * np.maximum(gy < h, any_j(near(x, gx, w / 2) & near(y, gy - h, h / 2)))
+    pending = g * (1.0 - sat)                                          # goals not reached yet
+    wait = g * any_j(pending[:, None, :] * (near(gx, gx, w) & near(gy, gy - h, h / 2)))
+    first = g * any_j(g[:, None, :] * (near(gx, gx, w) & near(gy - h, gy, h / 2)))
+    covered = any_j(near(x, x, w) & near(y - h, y, h / 2))
+    return np.stack([blocked, supported, wait, first, covered], -1), pending * (1.0 - supported)
 
 
 class SetNet:

@@ -33,7 +33,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from agent import Agent, gae
-from env2d import BLOCK_H, BLOCK_W, BlockWorld, observation
+from env2d import BLOCK_H, BLOCK_W, BlockWorld, is_success, observation
 
 
 @dataclass
@@ -43,6 +43,7 @@ class Config:
     rounds: int = 3                 # rounds of task expansion + self-distillation (sec 4.2-4.3)
     n_blocks: int = 6
     max_steps: int = 10             # actions per episode before truncation
+    short_steps: int = 3            # budget of the verification run (sec 4.2) and of stretch tasks
     hidden: int = 128               # width of the actor's and critic's per-block networks
     n_envs: int = 32                # environments stepped in lockstep (one batched policy call)
     # sec 4.1: base skills
@@ -53,6 +54,7 @@ class Config:
     # PPO (used for base fine-tuning, self-distillation and the direct-PPO baseline)
     ppo_steps: int = 20000          # environment steps per PPO phase
     ppo_episodes: int = 256         # episodes per PPO update
+    stretch: float = 0.5            # extra episodes per update on one-alteration "stretch" tasks
     ppo_epochs: int = 4
     ppo_minibatch: int = 256
     ppo_lr: float = 3e-4
@@ -195,34 +197,51 @@ def success_rate(trajs):
 # sec 4.1: base tasks -- one block moved, plus "stay where you are" goals for up to two others
 # --------------------------------------------------------------------------------------------
 
-def base_demos(cfg, env, rng, count, progress=None):
-    """Single-step demonstrations: a random block teleported onto the table or onto another block.
+def random_move(env, rng):
+    """A random single-block action: onto the table, or onto another block (overlapping >= 3/4).
 
-    The goal is relabelled with where the block came to rest, so every demo is correct by
-    construction. Returns (tasks, obs (count, n, 6), actions (count, 3)).
+    Returns (block, action), or None when the drawn target is not a layer of the grid.
+    """
+    state, n = env.get_state(), env.n_blocks
+    b = int(rng.integers(n))
+    if rng.random() < 0.5:                                   # somewhere on the table
+        return b, env.encode_action(b, env.x_bins[rng.integers(len(env.x_bins))], env.y_bins[0])
+    j = int(rng.choice([i for i in range(n) if i != b]))     # on top of block j
+    k = layer(state[j, 1]) + 1
+    if not 1 <= k < n:                                       # j is above the top layer or fell off
+        return None
+    return b, env.encode_action(b, state[j, 0] + rng.integers(-1, 2) * BLOCK_W / 4, env.y_bins[k])
+
+
+def base_demos(cfg, env, rng, count, progress=None):
+    """Single-step demonstrations (sec 4.1): one random block teleported somewhere it can rest.
+
+    Scenes start scattered and get up to 4 random warm-up moves first, so stacks of every height
+    occur and the demos place blocks on every layer. The goal is relabelled with where the block
+    came to rest, so every demo is correct by construction; up to two "stay where you are" goals
+    for other blocks make the goal count uniform in 1..3.
+    Returns (tasks, obs (count, n, 6), actions (count, 3)).
     """
     tasks, obs, actions = [], [], []
     n = env.n_blocks
     while len(tasks) < count:
         env.reset(seed=int(rng.integers(2**31)))
-        s0 = env.get_state()
-        b = int(rng.integers(n))
-        if rng.random() < 0.5:                     # somewhere on the table
-            x, k = env.x_bins[rng.integers(len(env.x_bins))], 0
-        else:                                      # on top of another block, overlapping by >= 3/4
-            j = int(rng.choice([i for i in range(n) if i != b]))
-            x, k = s0[j, 0] + rng.integers(-1, 2) * BLOCK_W / 4, layer(s0[j, 1]) + 1
-            if k >= n:
-                continue
-        a = env.encode_action(b, x, env.y_bins[k])
+        for _ in range(int(rng.integers(0, 5))):             # warm-up: build some random stacks
+            move = random_move(env, rng)
+            if move is not None:
+                env.step(move[1])
+        s0, move = env.get_state(), random_move(env, rng)
+        if move is None or not on_table(s0, env):
+            continue
+        b, a = move
         _, _, _, _, info = env.step(a)
         s1 = env.get_state()
         if info["noop"] or not info["stable"] or not on_table(s1, env):
             continue
         if np.linalg.norm(s1[b, :2] - s0[b, :2]) < env.threshold:
-            continue                               # nothing moved: nothing to learn
+            continue                                         # nothing moved: nothing to learn
         others = [int(i) for i in rng.permutation([i for i in range(n) if i != b])]
-        stay = others[: int(rng.integers(0, 3))]   # uniform goal count 1..3
+        stay = others[: int(rng.integers(0, 3))]
         goals = {i: (float(s1[i, 0]), float(s1[i, 1])) for i in [b] + stay}
         tasks.append((s0, goals))
         obs.append(observation(s0, goals))
@@ -236,48 +255,50 @@ def base_demos(cfg, env, rng, count, progress=None):
 # PPO phase
 # --------------------------------------------------------------------------------------------
 
-def ppo_phase(agent, tasks, cfg, envs, rng, label):
-    """PPO on tasks sampled uniformly from `tasks` for cfg.ppo_steps environment steps.
+def ppo_phase(agent, tasks, cfg, envs, short, rng, label):
+    """PPO on tasks drawn uniformly from `tasks` for cfg.ppo_steps environment steps.
 
-    Reward is 1 on success (the last step of a terminated episode), 0 otherwise; truncated
-    episodes bootstrap from V of their last state (handled by gae). Returns the per-update log.
+    Each update also runs cfg.stretch * ppo_episodes "stretch" tasks: a drawn task with one
+    alteration (as in sec 4.2), on the short budget of `short` envs. Most of them cannot be reached
+    in time, and that is their point: V(s, g) must see goals it cannot reach to rank candidates by
+    equation (1); the ones the policy does reach teach it a step beyond its data.
+    Returns the per-update log (agent.ppo_update's metrics plus steps and success rates).
     """
     log, steps = [], 0
     progress = Progress(cfg.ppo_steps, label)
     while steps < cfg.ppo_steps:
         batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.ppo_episodes)]
-        trajs = run_episodes(agent, batch, envs, rng)
-        obs, actions, logp, adv, ret = ppo_batch(agent, trajs, cfg)
+        stretch = [(s, alter(g, envs[0], rng)) for s, g in
+                   (tasks[i] for i in rng.integers(len(tasks), size=int(cfg.stretch * cfg.ppo_episodes)))]
+        main, extra = run_episodes(agent, batch, envs, rng), run_episodes(agent, stretch, short, rng)
+        trajs = main + extra
+        obs, actions, logp, adv, ret = ppo_batch(trajs, cfg)
         metrics = agent.ppo_update(obs, actions, logp, adv, ret, epochs=cfg.ppo_epochs,
                                    minibatch=cfg.ppo_minibatch, clip=cfg.clip, ent_coef=cfg.ent_coef,
                                    vf_coef=cfg.vf_coef, lr=cfg.ppo_lr, max_grad_norm=cfg.max_grad_norm,
                                    rng=rng)
         steps += len(actions)
-        metrics.update(steps=steps, success=success_rate(trajs))
+        metrics.update(steps=steps, success=success_rate(main), stretch_success=success_rate(extra))
         log.append(metrics)
-        progress.update(len(actions), f"success {metrics['success']:.2f}")
+        progress.update(len(actions), f"success {metrics['success']:.2f}, stretch {metrics['stretch_success']:.2f}")
     progress.close()
     return log
 
 
-def ppo_batch(agent, trajs, cfg):
-    """Flatten episodes into one sequence (T_total, 1) and compute GAE advantages and returns."""
-    all_obs = [t.obs() for t in trajs]
-    obs = np.concatenate([o[:-1] for o in all_obs])
+def ppo_batch(trajs, cfg):
+    """Flatten episodes into one sequence (T_total, 1) and compute GAE advantages and returns.
+
+    The reward is 1 on the step that succeeds and 0 otherwise. Running out of steps counts as
+    failure (no bootstrap): V(s, g) then estimates the discounted chance of reaching g within the
+    budget, so a goal that cannot be reached has value 0 -- what equation (1) needs to compare.
+    """
+    obs = np.concatenate([t.obs()[:-1] for t in trajs])
     actions = np.concatenate([t.actions for t in trajs])
     logp = np.concatenate([t.logp for t in trajs])
-    values = np.concatenate([t.values for t in trajs])
-    last_v = agent.value(np.stack([o[-1] for o in all_obs]))          # V(s_T): bootstrap on truncation
-    rewards, term, trunc, next_v = [], [], [], []
-    for t, v_T in zip(trajs, last_v):
-        end = np.zeros(len(t.actions))
-        end[-1] = 1.0
-        rewards.append(end * t.success)            # r = 1 only on the step that succeeds
-        term.append(end * t.success)
-        trunc.append(end * (not t.success))
-        next_v.append(np.append(t.values[1:], v_T))
-    r, te, tr, nv = (np.concatenate(x)[:, None] for x in (rewards, term, trunc, next_v))
-    adv, ret = gae(r, values[:, None], te, tr, nv, cfg.gamma, cfg.gae_lambda)
+    values = np.concatenate([t.values for t in trajs])[:, None]
+    ends = np.concatenate([np.arange(len(t.actions)) == len(t.actions) - 1 for t in trajs])[:, None] * 1.0
+    rewards = ends * np.concatenate([np.full(len(t.actions), t.success) for t in trajs])[:, None]
+    adv, ret = gae(rewards, values, ends, np.zeros_like(ends), np.zeros_like(ends), cfg.gamma, cfg.gae_lambda)
     return obs, actions, logp, adv[:, 0], ret[:, 0]
 
 
@@ -342,10 +363,12 @@ def relabel(traj, env):
     s0 = traj.states[0]
     if all(np.hypot(s0[b, 0] - x, s0[b, 1] - y) < env.threshold for b, (x, y) in goals.items()):
         return None
-    return Trajectory(goals, traj.states, traj.actions, True)
+    # the episode would have ended the first time the relabelled goal held: cut the rest
+    T = next(t for t in range(1, len(traj.states)) if is_success(traj.states[t], goals, env.threshold))
+    return Trajectory(goals, traj.states[: T + 1], traj.actions[:T], True)
 
 
-def task_expansion(agent, tasks, cfg, envs, rng):
+def task_expansion(agent, tasks, cfg, envs, short, rng):
     """One round of sec 4.2. tasks: the previous round's tasks. Returns (demos, info).
 
     1. run the policy on the tasks and keep the successful trajectories s0 -> sT;
@@ -355,15 +378,13 @@ def task_expansion(agent, tasks, cfg, envs, rng):
     """
     env = envs[0]
     batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
-    trajs = [t for t in run_episodes(agent, batch, envs, rng, progress=Progress(None, "  collect"))
-             if t.success]
+    trajs = [t for t in run_episodes(agent, batch, envs, rng) if t.success]
     chosen = []
     for t in trajs:
         cands = [alter(t.goals, env, rng, cfg.restrict) for _ in range(cfg.candidates)]
         i, _ = select_goal(agent, t.states[0], t.states[-1], cands, cfg.select)
         chosen.append(cands[i])
-    ext = run_episodes(agent, [(t.states[-1], g) for t, g in zip(trajs, chosen)], envs, rng,
-                       progress=Progress(None, "  verify"))
+    ext = run_episodes(agent, [(t.states[-1], g) for t, g in zip(trajs, chosen)], short, rng)
     demos, n_joined = [], 0
     for t, g, e in zip(trajs, chosen, ext):
         joined = join(t, e, g, e.success)
@@ -460,6 +481,7 @@ def run(cfg, out_dir, log=print):
     os.makedirs(out_dir, exist_ok=True)
     rng = np.random.default_rng(cfg.seed)
     envs = [BlockWorld(cfg.n_blocks, max_steps=cfg.max_steps) for _ in range(cfg.n_envs)]
+    short = [BlockWorld(cfg.n_blocks, max_steps=cfg.short_steps) for _ in range(cfg.n_envs)]
     agent = Agent(cfg.n_blocks, n_x=len(envs[0].x_bins), hidden=cfg.hidden, seed=cfg.seed)
     clock, t_start = {}, time.time()
     results = dict(config=asdict(cfg), rounds=[], wallclock=clock)
@@ -483,7 +505,7 @@ def run(cfg, out_dir, log=print):
     p.close()
     bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
     log(f"  BC loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
-    ppo_log = ppo_phase(agent, base_tasks, cfg, envs, rng, "  PPO base")
+    ppo_log = ppo_phase(agent, base_tasks, cfg, envs, short, rng, "  PPO base")
     finish_round(0, dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log]), t0)
 
     buffer_obs, buffer_act = obs, actions          # demos kept for self-distillation
@@ -493,11 +515,11 @@ def run(cfg, out_dir, log=print):
         t0 = time.time()
         if cfg.baseline == "direct-ppo":             # sec 5.3: no expansion, PPO on the test tasks
             log(f"[round {k}] direct PPO on the evaluation tasks")
-            ppo_log = ppo_phase(agent, eval_list, cfg, envs, rng, "  PPO direct")
+            ppo_log = ppo_phase(agent, eval_list, cfg, envs, short, rng, "  PPO direct")
             finish_round(k, dict(ppo_success=[m["success"] for m in ppo_log]), t0)
             continue
         log(f"[round {k}] task expansion from {len(prev_tasks)} tasks")
-        demos, info = task_expansion(agent, prev_tasks, cfg, envs, rng)
+        demos, info = task_expansion(agent, prev_tasks, cfg, envs, short, rng)
         stats = task_stats(demos, cfg.n_blocks)
         log(f"  {info['successful']}/{info['attempts']} successful, {info['joined']} joined, "
             f"{info['relabelled']} relabelled; {stats['high_goal_tasks']} tasks with >= 3 high goals")
@@ -513,7 +535,7 @@ def run(cfg, out_dir, log=print):
         log(f"  BC on {len(buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
         new_tasks = [(d.states[0], d.goals) for d in demos]
         old = [all_tasks[i] for i in rng.integers(len(all_tasks), size=len(new_tasks))]
-        ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, rng, "  PPO distil")
+        ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short, rng, "  PPO distil")
         all_tasks = (all_tasks + new_tasks)[-cfg.buffer_size:]
         prev_tasks = new_tasks
         finish_round(k, dict(expansion=info, bc_loss=bc_loss,

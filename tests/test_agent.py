@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from agent import (MLP, ActionDist, Adam, Agent, SetNet, bc_loss, clip_grad_norm, entropy_of,
-                   featurize, gae, log_softmax, ppo_loss, value_loss)
+                   featurize, gae, log_softmax, ppo_loss, relations, value_loss)
 
 EPS, TOL = 1e-6, 1e-5
 
@@ -208,12 +208,31 @@ def test_featurize_codes():
     obs[0, 0, 3:] = [0.005, 0.025, 1.0]                         # satisfied (0.5 cm away)
     obs[0, 1, 3:] = [-0.2, 0.125, 1.0]                          # not satisfied
     f = featurize(obs, n_y=3)
-    assert f.shape == (1, 3, 10 + 2 * 3 + 2 * 21)
+    assert f.shape == (1, 3, 15 + 2 * 3 + 3 * 21)
     assert list(f[0, :, 9]) == [1, 0, 0]                        # satisfied flag
     assert np.array_equal(f[0, :, 10:13], np.eye(3)[[0, 1, 0]])  # current layer one-hot
     assert np.array_equal(f[0, :, 13:16], [[1, 0, 0], [0, 0, 1], [0, 0, 0]])  # goal layer, no goal -> 0
     assert not f[0, 2, 4:10].any() and not f[0, 2, 16 + 21:].any()
-    assert f[0, 1, 16:37].argmax() == 14 and f[0, 1, 37:].argmax() == 6   # RBF centres every 5 cm
+    assert f[0, 1, 16:37].argmax() == 14 and f[0, 1, 37:58].argmax() == 6  # RBF centres every 5 cm
+
+
+def test_relations():
+    """Block 1's goal sits on block 0's goal; block 2 is in the way of block 0's goal."""
+    x, y = np.array([[-0.3, 0.3, 0.01]]), np.array([[0.025, 0.025, 0.025]])
+    gx, gy, g = np.array([[0.0, 0.0, 0.0]]), np.array([[0.025, 0.075, 0.0]]), np.array([[1.0, 1.0, 0.0]])
+    rel, needs = relations(x, y, gx, gy, g, np.zeros((1, 3)), 0.1, 0.05)
+    blocked, supported, wait, first, covered = rel[0].T
+    assert list(blocked) == [1, 0, 0] and list(supported) == [1, 1, 0]   # 2 is under 1's goal spot
+    assert list(wait) == [0, 1, 0] and list(first) == [1, 0, 0] and not covered.any()
+    assert not needs.any()
+    x[0, 2] = 0.4                                   # block 2 moves away: 1's goal hangs in the air
+    rel, needs = relations(x, y, gx, gy, g, np.zeros((1, 3)), 0.1, 0.05)
+    assert list(rel[0, :, 0]) == [0, 0, 0] and list(rel[0, :, 1]) == [1, 0, 0]
+    assert list(needs[0]) == [0, 1, 0]
+    x[0, 2] = 0.01
+    y[0, 1], x[0, 1] = 0.075, 0.02                  # block 1 now rests on block 2
+    rel, _ = relations(x, y, gx, gy, g, np.zeros((1, 3)), 0.1, 0.05)
+    assert list(rel[0, :, 4]) == [0, 0, 1] and rel[0, 1, 1] == 1    # 2 covered; 1's goal supported by 2
 
 
 def test_act_value_sample_shapes_and_errors():
