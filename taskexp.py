@@ -48,6 +48,7 @@ class Config:
     n_envs: int = 32                # environments stepped in lockstep (one batched policy call)
     # sec 4.1: base skills
     base_demos: int = 20000         # single-block demonstrations
+    warmup: int = 8                 # up to this many random moves before a demo: stacks of all heights
     bc_epochs: int = 8
     bc_batch: int = 256
     bc_lr: float = 1e-3
@@ -65,8 +66,8 @@ class Config:
     gamma: float = 0.9              # < 1 so V(s, g) also says how far the goal is
     gae_lambda: float = 0.95
     # sec 4.2: task expansion
-    expand_episodes: int = 1500     # attempts on the previous round's tasks per round
-    candidates: int = 32            # K one-alteration candidates per successful trajectory
+    expand_episodes: int = 3000     # attempts on the previous round's tasks per round
+    candidates: int = 64            # K one-alteration candidates per successful trajectory
     select: str = "ours"            # ours | end2new | init2new   (Table 3)
     restrict: bool = True           # False: candidates are unrelated random tasks (Table 3)
     # sec 4.3: self-distillation
@@ -185,7 +186,7 @@ def run_episodes(agent, tasks, envs, rng, deterministic=False, progress=None):
                 out[s["i"]] = Trajectory(tasks[s["i"]][1], np.stack(s["states"]), np.stack(s["actions"]),
                                          bool(terminated), np.array(s["logp"]), np.array(s["values"]))
                 if progress:
-                    progress.update(len(s["actions"]))
+                    progress.update(1)
                 start(k)
 
 
@@ -216,7 +217,7 @@ def random_move(env, rng):
 def base_demos(cfg, env, rng, count, progress=None):
     """Single-step demonstrations (sec 4.1): one random block teleported somewhere it can rest.
 
-    Scenes start scattered and get up to 4 random warm-up moves first, so stacks of every height
+    Scenes start scattered and get up to cfg.warmup random moves first, so stacks of every height
     occur and the demos place blocks on every layer. The goal is relabelled with where the block
     came to rest, so every demo is correct by construction; up to two "stay where you are" goals
     for other blocks make the goal count uniform in 1..3.
@@ -226,7 +227,7 @@ def base_demos(cfg, env, rng, count, progress=None):
     n = env.n_blocks
     while len(tasks) < count:
         env.reset(seed=int(rng.integers(2**31)))
-        for _ in range(int(rng.integers(0, 5))):             # warm-up: build some random stacks
+        for _ in range(int(rng.integers(0, cfg.warmup + 1))):  # warm-up: build some random stacks
             move = random_move(env, rng)
             if move is not None:
                 env.step(move[1])
@@ -378,13 +379,17 @@ def task_expansion(agent, tasks, cfg, envs, short, rng):
     """
     env = envs[0]
     batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
-    trajs = [t for t in run_episodes(agent, batch, envs, rng) if t.success]
+    progress = Progress(len(batch), "  collect")
+    trajs = [t for t in run_episodes(agent, batch, envs, rng, progress=progress) if t.success]
+    progress.close()
     chosen = []
     for t in trajs:
         cands = [alter(t.goals, env, rng, cfg.restrict) for _ in range(cfg.candidates)]
         i, _ = select_goal(agent, t.states[0], t.states[-1], cands, cfg.select)
         chosen.append(cands[i])
-    ext = run_episodes(agent, [(t.states[-1], g) for t, g in zip(trajs, chosen)], short, rng)
+    progress = Progress(len(trajs), "  verify")
+    ext = run_episodes(agent, [(t.states[-1], g) for t, g in zip(trajs, chosen)], short, rng, progress=progress)
+    progress.close()
     demos, n_joined = [], 0
     for t, g, e in zip(trajs, chosen, ext):
         joined = join(t, e, g, e.success)
@@ -405,16 +410,19 @@ def demo_arrays(demos):
     return (np.concatenate([d.obs()[:-1] for d in demos]), np.concatenate([d.actions for d in demos]))
 
 
-def task_stats(demos, n_blocks):
-    """Figures 1 and 2 and Table 1 of the paper for one round's generated tasks."""
-    counts = [len(d.goals) for d in demos]
-    heights = [max(layer(y) for _, y in d.goals.values()) for d in demos]
-    high = [sum(layer(y) >= 1 for _, y in d.goals.values()) >= 3 for d in demos]
-    return dict(tasks=len(demos),
+def task_stats(goals, lengths, n_blocks):
+    """Figures 1 and 2 and Table 1 of the paper for one round's tasks.
+
+    goals: list of goal dicts; lengths: the episode length of each task's demonstration.
+    """
+    counts = [len(g) for g in goals]
+    heights = [max(layer(y) for _, y in g.values()) for g in goals]
+    high = [sum(layer(y) >= 1 for _, y in g.values()) >= 3 for g in goals]
+    return dict(tasks=len(goals),
                 goal_count_hist=np.bincount(counts, minlength=n_blocks + 1)[1:].tolist(),
                 max_height_hist=np.bincount(heights, minlength=n_blocks)[:n_blocks].tolist(),
                 high_goal_tasks=int(np.sum(high)),
-                mean_episode_length=float(np.mean([len(d.actions) for d in demos])) if demos else 0.0)
+                mean_episode_length=float(np.mean(lengths)) if goals else 0.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -444,28 +452,27 @@ def evaluate(agent, tasks_by_shape, envs, rng):
 # --------------------------------------------------------------------------------------------
 
 class Progress:
-    """A one-line progress report with rate and ETA on stderr (total None: just counts)."""
+    """A progress line with elapsed time and ETA on stderr: redrawn in place on a terminal,
+    a new line every 10 s in a log file."""
 
     def __init__(self, total, label):
         self.total, self.label, self.done, self.t0, self.last = total, label, 0, time.time(), 0.0
+        self.tty = sys.stderr.isatty()
 
     def update(self, k=1, extra=""):
         self.done += k
         now = time.time()
-        if now - self.last < 0.5 and (self.total is None or self.done < self.total):
+        if now - self.last < (0.5 if self.tty else 10) and self.done < self.total:
             return
-        self.last = now
-        el = now - self.t0
-        msg = f"\r{self.label}: {self.done}"
-        if self.total:
-            eta = el / max(self.done, 1) * max(self.total - self.done, 0)
-            msg += f"/{self.total} ({100 * min(self.done / self.total, 1):.0f}%) {el:.0f}s, ETA {eta:.0f}s"
-        else:
-            msg += f" steps, {el:.0f}s"
-        print(msg + ("  " + extra if extra else ""), end="", file=sys.stderr, flush=True)
+        self.last, el = now, now - self.t0
+        eta = el / max(self.done, 1) * max(self.total - self.done, 0)
+        msg = (f"{self.label}: {self.done}/{self.total} ({100 * min(self.done / self.total, 1):.0f}%) "
+               f"{el:.0f}s, ETA {eta:.0f}s" + ("  " + extra if extra else ""))
+        print("\r" + msg if self.tty else msg, end="" if self.tty else "\n", file=sys.stderr, flush=True)
 
     def close(self):
-        print(file=sys.stderr, flush=True)
+        if self.tty:
+            print(file=sys.stderr, flush=True)
 
 
 def save_json(path, obj):
@@ -506,7 +513,8 @@ def run(cfg, out_dir, log=print):
     bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
     log(f"  BC loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
     ppo_log = ppo_phase(agent, base_tasks, cfg, envs, short, rng, "  PPO base")
-    finish_round(0, dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log]), t0)
+    finish_round(0, dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log],
+                         **task_stats([g for _, g in base_tasks], [1] * len(base_tasks), cfg.n_blocks)), t0)
 
     buffer_obs, buffer_act = obs, actions          # demos kept for self-distillation
     all_tasks, prev_tasks = list(base_tasks), base_tasks
@@ -520,7 +528,7 @@ def run(cfg, out_dir, log=print):
             continue
         log(f"[round {k}] task expansion from {len(prev_tasks)} tasks")
         demos, info = task_expansion(agent, prev_tasks, cfg, envs, short, rng)
-        stats = task_stats(demos, cfg.n_blocks)
+        stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
         log(f"  {info['successful']}/{info['attempts']} successful, {info['joined']} joined, "
             f"{info['relabelled']} relabelled; {stats['high_goal_tasks']} tasks with >= 3 high goals")
         if not demos:
@@ -573,8 +581,8 @@ def figures(results, out_dir):
         width = 0.8 / max(len(rounds), 1)
         for i, r in enumerate(rounds):
             h = np.array(r[key], float)
-            ax.bar(np.arange(len(h)) + (1 if key == "goal_count_hist" else 0) + i * width, h / max(h.sum(), 1),
-                   width, label=f"round {r['round']}")
+            x = np.arange(len(h)) + (1 if key == "goal_count_hist" else 0) + (i - (len(rounds) - 1) / 2) * width
+            ax.bar(x, h / max(h.sum(), 1), width, label=f"round {r['round']}" + (" (base)" if r["round"] == 0 else ""))
         ax.set_xlabel(xlabel)
         ax.set_ylabel("fraction of generated tasks")
         ax.legend()

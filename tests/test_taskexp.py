@@ -125,3 +125,11 @@ def test_cli_refuses_to_overwrite_a_run(tmp_path, capsys):
     with pytest.raises(SystemExit):
         taskexp.parse_args(["--out", str(tmp_path)])
     assert "already holds a run" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("flags", [["--select", "init2new", "--no-restrict"], ["--baseline", "direct-ppo"]])
+def test_cli_ablations_run(tmp_path, flags):
+    _, res = run_cli(tmp_path, *flags)
+    assert [r["round"] for r in res["rounds"]] == [0, 1]
+    cfg = res["config"]
+    assert (cfg["select"], cfg["restrict"]) == ("init2new", False) or cfg["baseline"] == "direct-ppo"
