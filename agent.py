@@ -1,5 +1,5 @@
 """Numpy agent for task expansion: MLPs with hand-written backward passes, a per-block set
-network, the factorised action distribution, behaviour cloning, PPO and GAE.  (~450 lines)
+network, the factorised action distribution, behaviour cloning, PPO and GAE.  (~500 lines)
 
 Paper: "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu).
 Sec 3: a goal-conditioned policy pi(a | s, g) and value V(s, g) over a set of blocks; an action

@@ -1,4 +1,4 @@
-"""env2d.py -- the 2D side-view block world of taskexp (pymunk physics, Gymnasium API). ~350 lines.
+"""env2d.py -- the 2D side-view block world of taskexp (pymunk physics, Gymnasium API). ~360 lines.
 
 The world of "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu), sec 5,
 seen from the side: n_blocks rigid blocks (10 cm x 5 cm, 0.1 kg) on a table one metre wide, under

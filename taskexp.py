@@ -14,7 +14,7 @@ sections 4 and 5, on the 2D block world of env2d.py with the numpy agent of agen
     python taskexp.py --select end2new      # an ablation of Table 3
 
 A task is a pair (s0, goals): a state array (n_blocks, 6) and a dict {block: (x, y)}.
-~600 lines; keep it there.
+~650 lines; keep it there.
 """
 import os
 
@@ -27,7 +27,7 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -71,7 +71,7 @@ class Config:
     select: str = "ours"            # ours | end2new | init2new   (Table 3)
     restrict: bool = True           # False: candidates are unrelated random tasks (Table 3)
     # sec 4.3: self-distillation
-    buffer_size: int = 60000        # demo steps kept for BC (oldest dropped first): the memory bound
+    buffer_size: int = 60000        # demo steps, and tasks, kept (oldest dropped first): the memory bound
     # sec 5: evaluation
     eval_episodes: int = 100        # per shape and round
     baseline: str = ""              # "direct-ppo": PPO on the evaluation tasks instead (sec 5.3)
@@ -108,6 +108,8 @@ def shape_goals(name, env, rng):
     Returns {block: (x, y)}; the shape's centre lies on the x grid so every goal is reachable.
     """
     cells = SHAPES[name]
+    if len(cells) > env.n_blocks:
+        raise ValueError(f"shape {name!r} needs {len(cells)} blocks, the world has {env.n_blocks}")
     reach = max(abs(dx) for dx, _ in cells) * BLOCK_W
     centres = env.x_bins[(env.x_bins - reach >= env.x_bins[0] - 1e-9) & (env.x_bins + reach <= env.x_bins[-1] + 1e-9)]
     cx = centres[rng.integers(len(centres))]
@@ -199,7 +201,8 @@ def success_rate(trajs):
 # --------------------------------------------------------------------------------------------
 
 def random_move(env, rng):
-    """A random single-block action: onto the table, or onto another block (overlapping >= 3/4).
+    """A random single-block action: onto the table, or onto another block (offset by at most
+    a quarter block, plus the rounding to the x grid).
 
     Returns (block, action), or None when the drawn target is not a layer of the grid.
     """
@@ -296,10 +299,13 @@ def ppo_batch(trajs, cfg):
     obs = np.concatenate([t.obs()[:-1] for t in trajs])
     actions = np.concatenate([t.actions for t in trajs])
     logp = np.concatenate([t.logp for t in trajs])
-    values = np.concatenate([t.values for t in trajs])[:, None]
-    ends = np.concatenate([np.arange(len(t.actions)) == len(t.actions) - 1 for t in trajs])[:, None] * 1.0
-    rewards = ends * np.concatenate([np.full(len(t.actions), t.success) for t in trajs])[:, None]
-    adv, ret = gae(rewards, values, ends, np.zeros_like(ends), np.zeros_like(ends), cfg.gamma, cfg.gae_lambda)
+    column = lambda per_episode: np.concatenate(per_episode)[:, None]      # -> (T_total, 1)
+    values = column([t.values for t in trajs])
+    last_step = column([np.arange(len(t.actions)) == len(t.actions) - 1 for t in trajs]) * 1.0
+    rewards = last_step * column([np.full(len(t.actions), t.success) for t in trajs])
+    next_values = column([np.append(t.values[1:], 0.0) for t in trajs])   # V(s_{t+1}); 0 after the end
+    # every episode end is terminal (success, or out of steps = failure), so nothing is truncated
+    adv, ret = gae(rewards, values, last_step, np.zeros_like(last_step), next_values, cfg.gamma, cfg.gae_lambda)
     return obs, actions, logp, adv[:, 0], ret[:, 0]
 
 
@@ -385,6 +391,8 @@ def task_expansion(agent, tasks, cfg, envs, short, rng):
     chosen = []
     for t in trajs:
         cands = [alter(t.goals, env, rng, cfg.restrict) for _ in range(cfg.candidates)]
+        # a candidate that already holds at sT is no new task (equation 1 would favour it)
+        cands = [g for g in cands if not is_success(t.states[-1], g, env.threshold)] or cands
         i, _ = select_goal(agent, t.states[0], t.states[-1], cands, cfg.select)
         chosen.append(cands[i])
     progress = Progress(len(trajs), "  verify")
@@ -489,7 +497,8 @@ def run(cfg, out_dir, log=print):
     rng = np.random.default_rng(cfg.seed)
     envs = [BlockWorld(cfg.n_blocks, max_steps=cfg.max_steps) for _ in range(cfg.n_envs)]
     short = [BlockWorld(cfg.n_blocks, max_steps=cfg.short_steps) for _ in range(cfg.n_envs)]
-    agent = Agent(cfg.n_blocks, n_x=len(envs[0].x_bins), hidden=cfg.hidden, seed=cfg.seed)
+    agent = Agent(cfg.n_blocks, n_x=len(envs[0].x_bins), hidden=cfg.hidden, seed=cfg.seed,
+                  block_size=envs[0].block_size, table_x=envs[0].table_x, threshold=envs[0].threshold)
     clock, t_start = {}, time.time()
     results = dict(config=asdict(cfg), rounds=[], wallclock=clock)
     evals = eval_tasks(cfg, envs[0], cfg.seed)

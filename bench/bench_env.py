@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-from env2d import DT, BlockWorld, _space_step  # noqa: E402
+from env2d import DROP_GAP, DT, BlockWorld, _space_step  # noqa: E402
 
 
 def run(env, actions, seed):
@@ -33,7 +33,7 @@ def run(env, actions, seed):
         start = env.get_state()
         _, _, _, _, info = env.step(a)
         if not info["noop"]:
-            start[a[0]] = (env.x_bins[a[1]], env.y_bins[a[2]] + 0.0005, 0, 0, 0, 0)
+            start[a[0]] = (env.x_bins[a[1]], env.y_bins[a[2]] + DROP_GAP, 0, 0, 0, 0)
             starts.append(start)
             substeps.append(info["settle_steps"])
     return time.perf_counter() - t0, starts, substeps

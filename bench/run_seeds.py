@@ -20,11 +20,11 @@ FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"]}
 
 
-def run_one(variant, seed, rounds, root, extra):
+def run_one(variant, seed, rounds, root, extra_args):
     out = os.path.join(root, f"{variant}-seed{seed}")
-    if not os.path.exists(os.path.join(out, "results.json")) or extra.get("force"):
+    if not os.path.exists(os.path.join(out, "results.json")):         # finished runs are reused
         cmd = [sys.executable, os.path.join(HERE, "..", "taskexp.py"), "--rounds", str(rounds),
-               "--seed", str(seed), "--out", out, *FLAGS[variant], *extra["args"]]
+               "--seed", str(seed), "--out", out, *FLAGS[variant], *extra_args]
         with open(out + ".log", "w") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
     with open(os.path.join(out, "results.json")) as f:
@@ -41,10 +41,10 @@ def main():
     p.add_argument("--scale", default=None, help="passed to taskexp.py (smaller budgets)")
     a = p.parse_args()
     os.makedirs(a.root, exist_ok=True)
-    extra = {"args": ["--scale", a.scale] if a.scale else []}
+    extra_args = ["--scale", a.scale] if a.scale else []
     jobs = [(v, s) for v in a.variants for s in a.seeds]
     with ThreadPoolExecutor(a.jobs) as pool:
-        done = list(pool.map(lambda vs: run_one(*vs, a.rounds, a.root, extra), jobs))
+        done = list(pool.map(lambda vs: run_one(*vs, a.rounds, a.root, extra_args), jobs))
     for variant in a.variants:
         res = [r for v, _, r in done if v == variant]
         shapes = list(res[0]["rounds"][0]["eval"])

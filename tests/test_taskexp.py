@@ -133,3 +133,25 @@ def test_cli_ablations_run(tmp_path, flags):
     assert [r["round"] for r in res["rounds"]] == [0, 1]
     cfg = res["config"]
     assert (cfg["select"], cfg["restrict"]) == ("init2new", False) or cfg["baseline"] == "direct-ppo"
+
+
+def test_ppo_batch_returns_are_lambda_returns():
+    """GAE over a flattened batch: per episode, R_t = A_t + V_t with the terminal value 0."""
+    cfg = taskexp.Config(gamma=0.9, gae_lambda=0.95)
+    obs_state = np.zeros((4, 6, 6))
+    t1 = taskexp.Trajectory({0: (0.0, 0.025)}, obs_state, np.zeros((3, 3), int), True,
+                            logp=np.zeros(3), values=np.array([0.7, 0.8, 0.9]))
+    t2 = taskexp.Trajectory({0: (0.0, 0.025)}, obs_state[:3], np.zeros((2, 3), int), False,
+                            logp=np.zeros(2), values=np.array([0.5, 0.4]))
+    _, _, _, adv, ret = taskexp.ppo_batch([t1, t2], cfg)
+    expected = []
+    for t in (t1, t2):
+        v, T, a, out = t.values, len(t.values), 0.0, []
+        for k in reversed(range(T)):
+            r = float(t.success and k == T - 1)
+            v_next = v[k + 1] if k + 1 < T else 0.0
+            a = r + cfg.gamma * v_next - v[k] + cfg.gamma * cfg.gae_lambda * a * (k + 1 < T)
+            out.append(a + v[k])
+        expected += out[::-1]
+    assert np.allclose(ret, expected) and np.allclose(adv, np.array(expected) - np.r_[t1.values, t2.values])
+    assert np.isclose(ret[2], 1.0) and np.isclose(ret[4], 0.0)      # success step; failed end
