@@ -259,21 +259,22 @@ def base_demos(cfg, env, rng, count, progress=None):
 # PPO phase
 # --------------------------------------------------------------------------------------------
 
-def ppo_phase(agent, tasks, cfg, envs, short, rng, label):
+def ppo_phase(agent, tasks, cfg, envs, short, rng, label, stretch=None):
     """PPO on tasks drawn uniformly from `tasks` for cfg.ppo_steps environment steps.
 
-    Each update also runs cfg.stretch * ppo_episodes "stretch" tasks: a drawn task with one
+    Each update also runs stretch (default cfg.stretch) * ppo_episodes "stretch" tasks: a drawn task with one
     alteration (as in sec 4.2), on the short budget of `short` envs. Most of them cannot be reached
     in time, and that is their point: V(s, g) must see goals it cannot reach to rank candidates by
     equation (1); the ones the policy does reach teach it a step beyond its data.
     Returns the per-update log (agent.ppo_update's metrics plus steps and success rates).
     """
     log, steps = [], 0
+    n_stretch = int((cfg.stretch if stretch is None else stretch) * cfg.ppo_episodes)
     progress = Progress(cfg.ppo_steps, label)
     while steps < cfg.ppo_steps:
         batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.ppo_episodes)]
         stretch = [(s, alter(g, envs[0], rng)) for s, g in
-                   (tasks[i] for i in rng.integers(len(tasks), size=int(cfg.stretch * cfg.ppo_episodes)))]
+                   (tasks[i] for i in rng.integers(len(tasks), size=n_stretch))]
         main, extra = run_episodes(agent, batch, envs, rng), run_episodes(agent, stretch, short, rng)
         trajs = main + extra
         obs, actions, logp, adv, ret = ppo_batch(trajs, cfg)
@@ -531,8 +532,9 @@ def run(cfg, out_dir, log=print):
     for k in range(1, cfg.rounds + 1):
         t0 = time.time()
         if cfg.baseline == "direct-ppo":             # sec 5.3: no expansion, PPO on the test tasks
+            # plain PPO: no stretch tasks, which would be a curriculum of altered test tasks
             log(f"[round {k}] direct PPO on the evaluation tasks")
-            ppo_log = ppo_phase(agent, eval_list, cfg, envs, short, rng, "  PPO direct")
+            ppo_log = ppo_phase(agent, eval_list, cfg, envs, short, rng, "  PPO direct", stretch=0.0)
             finish_round(k, dict(ppo_success=[m["success"] for m in ppo_log]), t0)
             continue
         log(f"[round {k}] task expansion from {len(prev_tasks)} tasks")

@@ -2,9 +2,9 @@
 
     python bench/draw_shapes.py --agent runs/ours-seed0/round3.npz --out docs/shapes.png
 
-Top row: a start scene of each shape's evaluation task. Bottom row: where the greedy policy of the
-checkpoint left the blocks (title: success or not). Without --agent the bottom row is the shape
-built by hand, bottom-up.
+Top row: a random start scene for each shape, made as the evaluation makes them. Bottom row:
+where the greedy policy of the checkpoint left the blocks (title: success or not). Without --agent
+the bottom row is the shape built by hand, bottom-up.
 """
 import os
 
