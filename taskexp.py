@@ -262,8 +262,8 @@ def base_demos(cfg, env, rng, count, progress=None):
 def ppo_phase(agent, tasks, cfg, envs, short, rng, label, stretch=None):
     """PPO on tasks drawn uniformly from `tasks` for cfg.ppo_steps environment steps.
 
-    Each update also runs stretch (default cfg.stretch) * ppo_episodes "stretch" tasks: a drawn task with one
-    alteration (as in sec 4.2), on the short budget of `short` envs. Most of them cannot be reached
+    Each update also runs stretch (default cfg.stretch) * ppo_episodes "stretch" tasks: a drawn
+    task with one alteration (as in sec 4.2), on the short budget of `short` envs. Most of them cannot be reached
     in time, and that is their point: V(s, g) must see goals it cannot reach to rank candidates by
     equation (1); the ones the policy does reach teach it a step beyond its data.
     Returns the per-update log (agent.ppo_update's metrics plus steps and success rates).
@@ -273,9 +273,9 @@ def ppo_phase(agent, tasks, cfg, envs, short, rng, label, stretch=None):
     progress = Progress(cfg.ppo_steps, label)
     while steps < cfg.ppo_steps:
         batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.ppo_episodes)]
-        stretch = [(s, alter(g, envs[0], rng)) for s, g in
-                   (tasks[i] for i in rng.integers(len(tasks), size=n_stretch))]
-        main, extra = run_episodes(agent, batch, envs, rng), run_episodes(agent, stretch, short, rng)
+        stretch_tasks = [(s, alter(g, envs[0], rng)) for s, g in
+                         (tasks[i] for i in rng.integers(len(tasks), size=n_stretch))]
+        main, extra = run_episodes(agent, batch, envs, rng), run_episodes(agent, stretch_tasks, short, rng)
         trajs = main + extra
         obs, actions, logp, adv, ret = ppo_batch(trajs, cfg)
         metrics = agent.ppo_update(obs, actions, logp, adv, ret, epochs=cfg.ppo_epochs,
@@ -368,8 +368,7 @@ def relabel(traj, env):
     if not on_table(sT, env):
         return None
     goals = {b: (float(sT[b, 0]), float(sT[b, 1])) for b in traj.goals}
-    s0 = traj.states[0]
-    if all(np.hypot(s0[b, 0] - x, s0[b, 1] - y) < env.threshold for b, (x, y) in goals.items()):
+    if is_success(traj.states[0], goals, env.threshold):
         return None
     # the episode would have ended the first time the relabelled goal held: cut the rest
     T = next(t for t in range(1, len(traj.states)) if is_success(traj.states[t], goals, env.threshold))
