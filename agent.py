@@ -1,5 +1,5 @@
 """Numpy agent for task expansion: MLPs with hand-written backward passes, a per-block set
-network, the factorised action distribution, behaviour cloning, PPO and GAE.  (~500 lines)
+network, the factorised action distribution, behaviour cloning, PPO and GAE.  (~570 lines)
 
 Paper: "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu).
 Sec 3: a goal-conditioned policy pi(a | s, g) and value V(s, g) over a set of blocks; an action
@@ -10,6 +10,7 @@ Everything is float64 numpy with no autograd: each forward caches what its backw
 every backward is checked against central finite differences in tests/test_agent.py.
 Randomness only through a passed np.random.Generator (or an integer seed for initialisation).
 """
+import json
 import os
 import zipfile
 
@@ -75,6 +76,17 @@ class Adam:
             self.m[k] = self.b1 * self.m[k] + (1.0 - self.b1) * g
             self.v[k] = self.b2 * self.v[k] + (1.0 - self.b2) * g * g
             self.params[k] -= self.lr * (self.m[k] / c1) / (np.sqrt(self.v[k] / c2) + self.eps)
+
+
+def check_finite(where, **named):
+    """Stop training at the first NaN or inf: FloatingPointError naming `where` (phase and step)
+    and what went bad.  named: scalars, arrays, or dicts of arrays (a network's parameters).
+    Without this a single overflow turns every weight into NaN and the run saves garbage."""
+    for name, v in named.items():
+        items = v.items() if isinstance(v, dict) else [("", v)]
+        bad = [k for k, a in items if not np.isfinite(a).all()]
+        if bad:
+            raise FloatingPointError(f"{where}: non-finite {name} {' '.join(bad[:3])}".rstrip())
 
 
 def clip_grad_norm(grads, max_norm):
@@ -372,27 +384,30 @@ class Agent:
         actions = np.asarray(actions, dtype=np.int64)
         self._check_actions(actions)
         loss = lambda out, a: bc_loss(out, a, self.n_x)
-        return self._fit(self.actor, self.actor_opt, loss, obs, actions, epochs, batch_size, lr, rng,
-                         max_grad_norm)
+        return self._fit("BC", self.actor, self.actor_opt, loss, obs, actions, epochs, batch_size, lr,
+                         rng, max_grad_norm)
 
     def fit_value(self, obs, returns, epochs, batch_size, lr, rng, max_grad_norm=None):
         """Regress V(s, g) on returns (e.g. of demonstrations): L = mean 0.5 (V - R)^2.
 
         obs (N, n, 6), returns (N,).  -> list of the mean minibatch loss of each epoch.
         """
-        return self._fit(self.critic, self.critic_opt, value_loss, obs, np.asarray(returns, np.float64),
-                         epochs, batch_size, lr, rng, max_grad_norm)
+        return self._fit("value fit", self.critic, self.critic_opt, value_loss, obs,
+                         np.asarray(returns, np.float64), epochs, batch_size, lr, rng, max_grad_norm)
 
-    def _fit(self, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng, max_grad_norm):
+    def _fit(self, phase, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng, max_grad_norm):
         """Minibatch Adam on loss_fn(out, targets) -> (L, dL/dout, ...); features are computed
         per minibatch, as (N, n, F) float64 for N = 100k would need ~300 MB."""
         obs, opt.lr, losses = np.asarray(obs, dtype=np.float64), lr, []
-        for _ in range(epochs):
+        for e in range(epochs):
             epoch = []
-            for idx in _minibatches(len(obs), batch_size, rng):
+            for i, idx in enumerate(_minibatches(len(obs), batch_size, rng)):
                 loss, dout = loss_fn(net.forward(self.features(obs[idx])), targets[idx])[:2]
-                opt.step(clip_grad_norm(net.backward(dout), max_grad_norm)[0])
+                grads, norm = clip_grad_norm(net.backward(dout), max_grad_norm)
+                check_finite(f"{phase} epoch {e + 1} minibatch {i + 1}", loss=loss, gradient_norm=norm)
+                opt.step(grads)
                 epoch.append(loss)
+            check_finite(f"{phase} epoch {e + 1}", parameters=net.params)
             losses.append(float(np.mean(epoch)))
         return losses
 
@@ -418,24 +433,30 @@ class Agent:
         self._check_actions(actions)
         logp_old, returns = np.asarray(logp_old, np.float64), np.asarray(returns, np.float64)
         adv = np.asarray(adv, dtype=np.float64)
+        check_finite("PPO update: inputs", logp_old=logp_old, advantages=adv, returns=returns)
         adv = (adv - adv.mean()) / (adv.std() + 1e-8)
         v_before = self.value(obs)
         var_r = np.var(returns)
         ev = float(1.0 - np.var(returns - v_before) / var_r) if var_r > 0 else float("nan")
         self.actor_opt.lr = self.critic_opt.lr = lr
         stats = []
-        for _ in range(epochs):
-            for idx in _minibatches(len(obs), minibatch, rng):
+        for e in range(epochs):
+            for i, idx in enumerate(_minibatches(len(obs), minibatch, rng)):
                 f = self.features(obs[idx])
-                _, dout, info = ppo_loss(self.actor.forward(f), actions[idx], logp_old[idx],
-                                         adv[idx], self.n_x, clip, ent_coef)
-                self.actor_opt.step(clip_grad_norm(self.actor.backward(dout), max_grad_norm)[0])
+                pl, dout, info = ppo_loss(self.actor.forward(f), actions[idx], logp_old[idx],
+                                          adv[idx], self.n_x, clip, ent_coef)
+                g_actor, norm_actor = clip_grad_norm(self.actor.backward(dout), max_grad_norm)
                 vl, dv, _ = value_loss(self.critic.forward(f), returns[idx])
-                g_critic = self.critic.backward(vf_coef * dv)
-                self.critic_opt.step(clip_grad_norm(g_critic, max_grad_norm)[0])
+                g_critic, norm_critic = clip_grad_norm(self.critic.backward(vf_coef * dv), max_grad_norm)
+                check_finite(f"PPO update epoch {e + 1} minibatch {i + 1}", policy_loss=pl, value_loss=vl,
+                             actor_gradient_norm=norm_actor, critic_gradient_norm=norm_critic)
+                self.actor_opt.step(g_actor)
+                self.critic_opt.step(g_critic)
                 r = info["ratio"]
                 stats.append((info["policy_loss"], vl, info["entropy"], np.mean(r - 1 - np.log(r)),
                               np.mean(np.abs(r - 1) > clip)))
+            check_finite(f"PPO update epoch {e + 1}", actor_parameters=self.actor.params,
+                         critic_parameters=self.critic.params)
         names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac")
         return {**dict(zip(names, np.mean(stats, 0).tolist())), "explained_variance": ev}
 
@@ -453,34 +474,41 @@ class Agent:
         """{"actor.phi.W0": array, ...}: every parameter, no optimiser state."""
         return {f"{net}.{k}": p for net in ("actor", "critic") for k, p in getattr(self, net).params.items()}
 
-    def save(self, path):
+    def training_state(self):
+        """What decides future updates besides the parameters, for resuming a run exactly:
+        both Adam states (m, v, t) and the agent's own Generator (its state as JSON text)."""
+        out = {"rng": np.array(json.dumps(self.rng.bit_generator.state))}
+        for name in ("actor_opt", "critic_opt"):
+            opt = getattr(self, name)
+            out[f"{name}.t"] = np.array(opt.t, dtype=np.int64)
+            out.update({f"{name}.{mv}.{k}": a for mv in "mv" for k, a in getattr(opt, mv).items()})
+        return out
+
+    def load_training_state(self, data, path):
+        """Inverse of training_state, from the arrays `data` of file `path` (named in errors)."""
+        for key, want in self.training_state().items():
+            if key not in data or data[key].shape != want.shape or data[key].dtype.kind != want.dtype.kind:
+                raise ValueError(f"{path}: {key} missing or not like {want.dtype} {want.shape}")
+        self.rng.bit_generator.state = json.loads(str(data["rng"]))
+        for name in ("actor_opt", "critic_opt"):
+            opt = getattr(self, name)
+            opt.t = int(data[f"{name}.t"])
+            for mv in "mv":
+                getattr(opt, mv).update({k: data[f"{name}.{mv}.{k}"].copy() for k in opt.params})
+
+    def save(self, path, extra=None):
         """Write the parameters plus header ("format_version", "sizes" = n_blocks, n_x, n_y,
-        hidden) as a plain .npz.  Atomic (a temporary file, then os.replace) and byte-identical
-        for identical parameters (fixed zip timestamps, sorted keys)."""
-        arrays = {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
-                  "sizes": np.array([self.n_blocks, self.n_x, self.n_y, self.hidden], dtype=np.int64),
-                  **self.state_dict()}
-        tmp = f"{path}.tmp{os.getpid()}"
-        try:
-            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED) as zf:
-                for key in sorted(arrays):
-                    info = zipfile.ZipInfo(key + ".npy", date_time=(1980, 1, 1, 0, 0, 0))
-                    with zf.open(info, "w", force_zip64=True) as fh:
-                        np.lib.format.write_array(fh, arrays[key], allow_pickle=False)
-            os.replace(tmp, path)
-        finally:
-            if os.path.exists(tmp):
-                os.remove(tmp)
+        hidden) and any `extra` arrays as a plain .npz (see save_npz)."""
+        save_npz(path, {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
+                        "sizes": np.array([self.n_blocks, self.n_x, self.n_y, self.hidden], dtype=np.int64),
+                        **self.state_dict(), **(extra or {})})
 
     @classmethod
-    def load(cls, path, **geometry):
-        """Read a file written by save -> Agent.  ValueError naming the file on a corrupt or
-        truncated file, a wrong format version, or keys/shapes that do not match the sizes."""
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
-            raise ValueError(f"{path}: not a readable agent file ({type(e).__name__}: {e})") from e
+    def load(cls, path, extra=(), **geometry):
+        """Read a file written by save -> Agent (or (Agent, {key: array}) for the keys in `extra`).
+        ValueError naming the file on a corrupt or truncated file, a wrong format version, or
+        keys/shapes that do not match the sizes."""
+        data = load_npz(path)
         if "format_version" not in data or "sizes" not in data:
             raise ValueError(f"{path}: missing header (format_version, sizes)")
         version, sizes = data["format_version"], data["sizes"]
@@ -491,16 +519,45 @@ class Agent:
                              "(n_blocks, n_x, n_y, hidden)")
         n_blocks, n_x, n_y, hidden = (int(k) for k in sizes)
         agent = cls(n_blocks, n_x, n_y, hidden, **geometry)
-        params = agent.state_dict()
-        if set(params) != set(data) - {"format_version", "sizes"}:
-            diff = sorted(set(params) ^ (set(data) - {"format_version", "sizes"}))
+        params, extra = agent.state_dict(), set(extra)
+        missing = extra - set(data)
+        if missing:
+            raise ValueError(f"{path}: missing {sorted(missing)}")
+        if set(params) != set(data) - {"format_version", "sizes"} - extra:
+            diff = sorted(set(params) ^ (set(data) - {"format_version", "sizes"} - extra))
             raise ValueError(f"{path}: keys do not match sizes {sizes.tolist()}: {diff}")
         for k, p in params.items():
             if data[k].shape != p.shape or data[k].dtype.kind != "f" or not np.isfinite(data[k]).all():
                 raise ValueError(f"{path}: {k} is {data[k].dtype} {data[k].shape}, expected finite "
                                  f"float {p.shape} for sizes {sizes.tolist()}")
             p[...] = data[k]                      # in place: the networks and Adam share p
-        return agent
+        return (agent, {k: data[k] for k in extra}) if extra else agent
+
+
+def save_npz(path, arrays):
+    """Write {name: array} as a plain .npz (no pickle).  Atomic -- a temporary file, then
+    os.replace -- so a run killed mid-write leaves the previous file intact; byte-identical for
+    identical arrays (fixed zip timestamps, sorted keys), so runs can be compared file to file."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    try:
+        with zipfile.ZipFile(tmp, "w", zipfile.ZIP_STORED) as zf:
+            for key in sorted(arrays):
+                info = zipfile.ZipInfo(key + ".npy", date_time=(1980, 1, 1, 0, 0, 0))
+                with zf.open(info, "w", force_zip64=True) as fh:
+                    np.lib.format.write_array(fh, np.asarray(arrays[key]), allow_pickle=False)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def load_npz(path):
+    """Read a .npz without pickle -> {name: array}; ValueError naming the file if unreadable."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
+        raise ValueError(f"{path}: not a readable .npz file ({type(e).__name__}: {e})") from e
 
 
 def _minibatches(N, size, rng):

@@ -14,7 +14,7 @@ sections 4 and 5, on the 2D block world of env2d.py with the numpy agent of agen
     python taskexp.py --select end2new      # an ablation of Table 3
 
 A task is a pair (s0, goals): a state array (n_blocks, 6) and a dict {block: (x, y)}.
-~650 lines; keep it there.
+~800 lines; keep it there.
 """
 import os
 
@@ -24,9 +24,11 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse
+import glob
 import json
 import sys
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -278,10 +280,11 @@ def ppo_phase(agent, tasks, cfg, envs, short, rng, label, stretch=None):
         main, extra = run_episodes(agent, batch, envs, rng), run_episodes(agent, stretch_tasks, short, rng)
         trajs = main + extra
         obs, actions, logp, adv, ret = ppo_batch(trajs, cfg)
-        metrics = agent.ppo_update(obs, actions, logp, adv, ret, epochs=cfg.ppo_epochs,
-                                   minibatch=cfg.ppo_minibatch, clip=cfg.clip, ent_coef=cfg.ent_coef,
-                                   vf_coef=cfg.vf_coef, lr=cfg.ppo_lr, max_grad_norm=cfg.max_grad_norm,
-                                   rng=rng)
+        with phase(f"{label.strip()} update {len(log) + 1}"):
+            metrics = agent.ppo_update(obs, actions, logp, adv, ret, epochs=cfg.ppo_epochs,
+                                       minibatch=cfg.ppo_minibatch, clip=cfg.clip, ent_coef=cfg.ent_coef,
+                                       vf_coef=cfg.vf_coef, lr=cfg.ppo_lr, max_grad_norm=cfg.max_grad_norm,
+                                       rng=rng)
         steps += len(actions)
         metrics.update(steps=steps, success=success_rate(main), stretch_success=success_rate(extra))
         log.append(metrics)
@@ -491,53 +494,146 @@ def save_json(path, obj):
     os.replace(tmp, path)
 
 
-def run(cfg, out_dir, log=print):
-    """Train the base policy, run cfg.rounds rounds, evaluate after each. Returns results dict."""
+@contextmanager
+def phase(where):
+    """Prefix a FloatingPointError raised by training (agent.check_finite) with where in the run."""
+    try:
+        yield
+    except FloatingPointError as e:
+        raise FloatingPointError(f"{where}: {e}") from None
+
+
+def peak_memory_mb():
+    """Peak resident memory of this process so far (MB), or None where `resource` is missing."""
+    try:
+        import resource
+    except ImportError:                                      # Windows
+        return None
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / (2**20 if sys.platform == "darwin" else 2**10))
+
+
+# --------------------------------------------------------------------------------------------
+# Resuming: after every round, state.npz holds all a run needs to go on exactly as if never stopped
+# --------------------------------------------------------------------------------------------
+
+STATE_VERSION = 1
+STATE_KEYS = ("state_version", "round", "results", "run_rng", "buffer_obs", "buffer_act", "all_tasks.states",
+              "all_tasks.goals", "prev_tasks.states", "prev_tasks.goals")
+
+
+def tasks_to_arrays(tasks, n_blocks):
+    """[(s0 (n, 6), {block: (x, y)})] -> states (N, n, 6), goals (N, n, 3) of x, y and the goal's
+    place in the dict (nan: no goal). The order matters: alter() draws from list(goals)."""
+    states = np.stack([s0 for s0, _ in tasks])
+    goals = np.full((len(tasks), n_blocks, 3), np.nan)
+    for i, (_, g) in enumerate(tasks):
+        for order, (b, (x, y)) in enumerate(g.items()):
+            goals[i, b] = (x, y, order)
+    return states, goals
+
+
+def arrays_to_tasks(states, goals):
+    """Inverse of tasks_to_arrays."""
+    out = []
+    for s0, g in zip(states, goals):
+        blocks = sorted(np.flatnonzero(~np.isnan(g[:, 2])), key=lambda b: g[b, 2])
+        out.append((s0, {int(b): (float(g[b, 0]), float(g[b, 1])) for b in blocks}))
+    return out
+
+
+def save_state(path, k, agent, rng, kept, results):
+    """After round k: the agent with its optimiser, the run's Generator, the kept data, the results."""
+    arrays = {"state_version": np.array(STATE_VERSION), "round": np.array(k),
+              "results": np.array(json.dumps(results)), "run_rng": np.array(json.dumps(rng.bit_generator.state)),
+              "buffer_obs": kept["buffer_obs"], "buffer_act": kept["buffer_act"], **agent.training_state()}
+    for name in ("all_tasks", "prev_tasks"):
+        arrays[f"{name}.states"], arrays[f"{name}.goals"] = tasks_to_arrays(kept[name], agent.n_blocks)
+    agent.save(path, extra=arrays)
+
+
+def load_state(path, cfg, agent, rng):
+    """Read what save_state wrote, for an agent like `agent`; restore rng -> (agent, round,
+    results, kept). ValueError naming the file when it is unreadable or from other settings."""
+    saved, data = Agent.load(path, extra=STATE_KEYS + tuple(agent.training_state()), **agent.geometry)
+    if int(data["state_version"]) != STATE_VERSION:
+        raise ValueError(f"{path}: state_version {data['state_version']}, expected {STATE_VERSION}")
+    results = json.loads(str(data["results"]))
+    ours, theirs = asdict(cfg), dict(results["config"])
+    ours["shapes"], theirs["rounds"] = list(ours["shapes"]), ours["rounds"]    # rounds may be extended
+    if ours != theirs:
+        diff = {k: (theirs.get(k), v) for k, v in ours.items() if theirs.get(k) != v}
+        raise ValueError(f"{path}: saved by a run with other settings (saved, now): {diff}")
+    results["config"] = asdict(cfg)
+    saved.load_training_state(data, path)
+    rng.bit_generator.state = json.loads(str(data["run_rng"]))
+    kept = {"buffer_obs": data["buffer_obs"], "buffer_act": data["buffer_act"]}
+    for name in ("all_tasks", "prev_tasks"):
+        kept[name] = arrays_to_tasks(data[f"{name}.states"], data[f"{name}.goals"])
+    return saved, int(data["round"]), results, kept
+
+
+def run(cfg, out_dir, log=print, resume=False):
+    """Train the base policy, run cfg.rounds rounds, evaluate after each. Returns results dict.
+
+    After round k: round{k}.npz (the agent), state.npz (for resume=True, which goes on from the
+    last complete round and gives the same results as a run never stopped), results.json.
+    """
     os.makedirs(out_dir, exist_ok=True)
     rng = np.random.default_rng(cfg.seed)
     envs = [BlockWorld(cfg.n_blocks, max_steps=cfg.max_steps) for _ in range(cfg.n_envs)]
     short = [BlockWorld(cfg.n_blocks, max_steps=cfg.short_steps) for _ in range(cfg.n_envs)]
     agent = Agent(cfg.n_blocks, n_x=len(envs[0].x_bins), hidden=cfg.hidden, seed=cfg.seed,
                   block_size=envs[0].block_size, table_x=envs[0].table_x, threshold=envs[0].threshold)
-    clock, t_start = {}, time.time()
-    results = dict(config=asdict(cfg), rounds=[], wallclock=clock)
     evals = eval_tasks(cfg, envs[0], cfg.seed)
+    state_path = os.path.join(out_dir, "state.npz")
+    if resume:
+        agent, done, results, kept = load_state(state_path, cfg, agent, rng)
+        log(f"resuming {out_dir} after round {done}")
+    else:
+        done, results, kept = -1, dict(config=asdict(cfg), rounds=[], wallclock={}), {}
+    clock = results["wallclock"]
+    t_start = time.time() - clock.get("total_s", 0.0)
 
     def finish_round(k, stats, t0):
         ev = evaluate(agent, evals, envs, rng)
-        agent.save(os.path.join(out_dir, f"round{k}.npz"))
         results["rounds"].append(dict(round=k, eval=ev, **stats))
         clock[f"round{k}_s"] = round(time.time() - t0, 1)
         clock["total_s"] = round(time.time() - t_start, 1)
+        clock["peak_memory_mb"] = peak_memory_mb()
+        agent.save(os.path.join(out_dir, f"round{k}.npz"))
+        save_state(state_path, k, agent, rng, kept, results)          # the commit point of round k
         save_json(os.path.join(out_dir, "results.json"), results)
         log(f"round {k}: zero-shot " + ", ".join(f"{s} {v:.0%}" for s, v in ev.items())
-            + f"  ({clock['total_s']:.0f}s so far)")
+            + f"  ({clock['total_s']:.0f}s so far, peak memory {clock['peak_memory_mb']} MB)")
 
-    # sec 4.1 -- base skills
-    t0 = time.time()
-    log(f"[round 0] base skills: {cfg.base_demos} single-block demos, BC, PPO")
-    p = Progress(cfg.base_demos, "  demos")
-    base_tasks, obs, actions = base_demos(cfg, envs[0], rng, cfg.base_demos, p)
-    p.close()
-    bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
-    log(f"  BC loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
-    ppo_log = ppo_phase(agent, base_tasks, cfg, envs, short, rng, "  PPO base")
-    finish_round(0, dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log],
-                         **task_stats([g for _, g in base_tasks], [1] * len(base_tasks), cfg.n_blocks)), t0)
+    if done < 0:                                     # sec 4.1 -- base skills
+        t0 = time.time()
+        log(f"[round 0] base skills: {cfg.base_demos} single-block demos, BC, PPO")
+        p = Progress(cfg.base_demos, "  demos")
+        base_tasks, obs, actions = base_demos(cfg, envs[0], rng, cfg.base_demos, p)
+        p.close()
+        with phase("round 0, BC"):
+            bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
+        log(f"  BC loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
+        with phase("round 0"):
+            ppo_log = ppo_phase(agent, base_tasks, cfg, envs, short, rng, "  PPO base")
+        # demos kept for self-distillation; tasks kept to mix into later PPO phases
+        kept = dict(buffer_obs=obs, buffer_act=actions, all_tasks=list(base_tasks), prev_tasks=base_tasks)
+        finish_round(0, dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log],
+                             **task_stats([g for _, g in base_tasks], [1] * len(base_tasks), cfg.n_blocks)), t0)
 
-    buffer_obs, buffer_act = obs, actions          # demos kept for self-distillation
-    all_tasks, prev_tasks = list(base_tasks), base_tasks
     eval_list = [t for ts in evals.values() for t in ts]
-    for k in range(1, cfg.rounds + 1):
+    for k in range(max(done, 0) + 1, cfg.rounds + 1):
         t0 = time.time()
         if cfg.baseline == "direct-ppo":             # sec 5.3: no expansion, PPO on the test tasks
             # plain PPO: no stretch tasks, which would be a curriculum of altered test tasks
             log(f"[round {k}] direct PPO on the evaluation tasks")
-            ppo_log = ppo_phase(agent, eval_list, cfg, envs, short, rng, "  PPO direct", stretch=0.0)
+            with phase(f"round {k}"):
+                ppo_log = ppo_phase(agent, eval_list, cfg, envs, short, rng, "  PPO direct", stretch=0.0)
             finish_round(k, dict(ppo_success=[m["success"] for m in ppo_log]), t0)
             continue
-        log(f"[round {k}] task expansion from {len(prev_tasks)} tasks")
-        demos, info = task_expansion(agent, prev_tasks, cfg, envs, short, rng)
+        log(f"[round {k}] task expansion from {len(kept['prev_tasks'])} tasks")
+        demos, info = task_expansion(agent, kept["prev_tasks"], cfg, envs, short, rng)
         stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
         log(f"  {info['successful']}/{info['attempts']} successful, {info['joined']} joined, "
             f"{info['relabelled']} relabelled; {stats['high_goal_tasks']} tasks with >= 3 high goals")
@@ -545,17 +641,20 @@ def run(cfg, out_dir, log=print):
             log("  no demonstrations generated; keeping the current policy")
             finish_round(k, dict(expansion=info, **stats), t0)
             continue
-        # sec 4.3 -- self-distillation on the new demos mixed with the old (bounded buffer)
+        # sec 4.3 -- self-distillation on the new demos mixed with the old. The buffer and the task
+        # list keep the newest cfg.buffer_size entries: the memory bound of a long run.
         new_obs, new_act = demo_arrays(demos)
-        buffer_obs = np.concatenate([buffer_obs, new_obs])[-cfg.buffer_size:]
-        buffer_act = np.concatenate([buffer_act, new_act])[-cfg.buffer_size:]
-        bc_loss = agent.bc(buffer_obs, buffer_act, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
-        log(f"  BC on {len(buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
-        new_tasks = [(d.states[0], d.goals) for d in demos]
+        kept["buffer_obs"] = np.concatenate([kept["buffer_obs"], new_obs])[-cfg.buffer_size:]
+        kept["buffer_act"] = np.concatenate([kept["buffer_act"], new_act])[-cfg.buffer_size:]
+        with phase(f"round {k}, BC"):
+            bc_loss = agent.bc(kept["buffer_obs"], kept["buffer_act"], cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
+        log(f"  BC on {len(kept['buffer_act'])} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
+        new_tasks = [(d.states[0].copy(), d.goals) for d in demos]     # a copy: not the whole episode
+        all_tasks = kept["all_tasks"]
         old = [all_tasks[i] for i in rng.integers(len(all_tasks), size=len(new_tasks))]
-        ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short, rng, "  PPO distil")
-        all_tasks = (all_tasks + new_tasks)[-cfg.buffer_size:]
-        prev_tasks = new_tasks
+        with phase(f"round {k}"):
+            ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short, rng, "  PPO distil")
+        kept["all_tasks"], kept["prev_tasks"] = (all_tasks + new_tasks)[-cfg.buffer_size:], new_tasks
         finish_round(k, dict(expansion=info, bc_loss=bc_loss,
                              ppo_success=[m["success"] for m in ppo_log], **stats), t0)
     return results
@@ -602,42 +701,96 @@ def figures(results, out_dir):
     return paths
 
 
+RUN_FILES = ("results.json", "state.npz", "round*.npz")      # what a run leaves in its directory
+
+
 def parse_args(argv=None):
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0],
-                                formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    """-> (Config, output directory, resume?). Refuses bad settings with a one-line reason."""
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     d = Config()
-    p.add_argument("--rounds", type=int, default=d.rounds, help="rounds of task expansion (>= 1)")
-    p.add_argument("--seed", type=int, default=d.seed)
-    p.add_argument("--out", default=None, help="output directory (default runs/<settings>)")
-    p.add_argument("--select", choices=["ours", "end2new", "init2new"], default=d.select,
-                   help="goal selection rule (equation 1 and the Table 3 ablations)")
-    p.add_argument("--no-restrict", action="store_true",
+    p.add_argument("--rounds", type=int, default=None, help=f"rounds of task expansion, >= 1 (default {d.rounds})")
+    p.add_argument("--seed", type=int, default=None, help=f"a non-negative int (default {d.seed})")
+    p.add_argument("--blocks", type=int, default=None,
+                   help=f"blocks in the world (default {d.n_blocks}; the held-out shapes need 6, the table holds 8)")
+    p.add_argument("--out", default=None, help="output directory (default runs/<settings>-seed<seed>)")
+    p.add_argument("--select", choices=["ours", "end2new", "init2new"], default=None,
+                   help="goal selection rule (equation 1 and the Table 3 ablations; default ours)")
+    p.add_argument("--no-restrict", action="store_true", default=None,
                    help="candidates are unrelated random tasks instead of one alteration (Table 3)")
     p.add_argument("--baseline", choices=["direct-ppo"], default=None,
                    help="skip task expansion; PPO directly on the evaluation tasks (sec 5.3)")
-    p.add_argument("--scale", type=float, default=1.0,
-                   help="multiply every data and step budget (e.g. 0.05 for a smoke test)")
+    p.add_argument("--scale", type=float, default=None,
+                   help="multiply every data and step budget (e.g. 0.05 for a smoke test; default 1)")
+    p.add_argument("--resume", action="store_true",
+                   help="go on from the last complete round of the run in --out, with its settings "
+                        "(--rounds may raise the number of rounds)")
     a = p.parse_args(argv)
-    if a.rounds < 1:
+    if a.rounds is not None and a.rounds < 1:
         p.error(f"--rounds must be >= 1, got {a.rounds}")
-    if not 0 < a.scale <= 100:
-        p.error(f"--scale must be in (0, 100], got {a.scale}")
-    cfg = Config(seed=a.seed, rounds=a.rounds, select=a.select, restrict=not a.no_restrict,
-                 baseline=a.baseline or "")
-    if a.scale != 1.0:
+    if a.resume:
+        given = [f for f in ("seed", "blocks", "select", "no_restrict", "baseline", "scale") if getattr(a, f) is not None]
+        if given:
+            p.error(f"--resume uses the settings saved in --out; drop --{given[0].replace('_', '-')}")
+        if a.out is None:
+            p.error("--resume needs --out, the directory of the run to go on with")
+        try:
+            with open(os.path.join(a.out, "results.json")) as f:
+                saved = json.load(f)
+            cfg = Config(**{**saved["config"], "shapes": tuple(saved["config"]["shapes"])})
+            done = saved["rounds"][-1]["round"]
+        except (OSError, ValueError, KeyError, TypeError, IndexError) as e:
+            p.error(f"--resume: {a.out} holds no readable run ({type(e).__name__}: {e})")
+        cfg.rounds = cfg.rounds if a.rounds is None else a.rounds
+        if done >= cfg.rounds:
+            p.error(f"--resume: {a.out} has finished all {cfg.rounds} rounds; pass a larger --rounds to extend it")
+        return cfg, a.out, True
+    given = {k: v for k, v in dict(seed=a.seed, rounds=a.rounds, n_blocks=a.blocks, select=a.select,
+                                   baseline=a.baseline, restrict=False if a.no_restrict else None).items()
+             if v is not None}
+    cfg = Config(**given)
+    if cfg.seed < 0:
+        p.error(f"--seed must be >= 0, got {cfg.seed}")
+    need = max(len(SHAPES[s]) for s in cfg.shapes)
+    if not need <= cfg.n_blocks <= 8:
+        p.error(f"--blocks must be in {need}..8 (the held-out shapes need {need} blocks, the table holds 8), "
+                f"got {cfg.n_blocks}")
+    scale = 1.0 if a.scale is None else a.scale
+    if not 0 < scale <= 100:
+        p.error(f"--scale must be in (0, 100], got {scale}")
+    if scale != 1.0:
         for name in ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes"):
-            setattr(cfg, name, max(4, int(round(getattr(cfg, name) * a.scale))))
-    tag = a.baseline or f"{a.select}{'-norestrict' if a.no_restrict else ''}"
-    out = a.out or os.path.join("runs", f"{tag}-seed{a.seed}")
-    if os.path.exists(os.path.join(out, "results.json")):
-        p.error(f"{out} already holds a run (results.json); choose another --out or delete it")
-    return cfg, out
+            setattr(cfg, name, max(4, int(round(getattr(cfg, name) * scale))))
+    tag = cfg.baseline or f"{cfg.select}{'' if cfg.restrict else '-norestrict'}"
+    tag += "" if cfg.n_blocks == d.n_blocks else f"-{cfg.n_blocks}blocks"
+    out = a.out or os.path.join("runs", f"{tag}-seed{cfg.seed}")
+    found = [f for pattern in RUN_FILES for f in glob.glob(os.path.join(glob.escape(out), pattern))]
+    if found:
+        p.error(f"{out} already holds a run ({os.path.basename(sorted(found)[0])}); "
+                f"continue it with --resume --out {out}, or choose another --out")
+    return cfg, out, False
+
+
+def last_round(out):
+    """What a stopped run left in `out`, and how to go on from it."""
+    try:
+        with open(os.path.join(out, "results.json")) as f:
+            k = json.load(f)["rounds"][-1]["round"]
+    except (OSError, ValueError, KeyError, IndexError):
+        return f"no round was complete, so there is nothing to resume in {out}."
+    return f"rounds 0..{k} are saved in {out}; go on with:\n    python taskexp.py --resume --out {out}"
 
 
 def main(argv=None):
-    cfg, out = parse_args(argv)
-    with threadpool_limits(limits=1):
-        results = run(cfg, out)
+    cfg, out, resume = parse_args(argv)
+    try:
+        with threadpool_limits(limits=1):
+            results = run(cfg, out, resume=resume)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted; {last_round(out)}", file=sys.stderr)
+        sys.exit(130)
+    except FloatingPointError as e:
+        print(f"\nerror: training diverged: {e}\n{last_round(out)}", file=sys.stderr)
+        sys.exit(1)
     print()
     print(tables(results))
     for path in figures(results, out):

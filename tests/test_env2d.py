@@ -232,3 +232,68 @@ def test_observation_and_is_success_helpers():
     assert obs.shape == (6, 6) and obs.dtype == np.float32
     assert np.allclose(obs[2, 3:], (0.1, 0.075, 1.0)) and not obs[[0, 1, 3, 4, 5], 3:].any()
     assert is_success(state, {1: (-0.25 + 0.019, 0.025)}) and not is_success(state, {1: (-0.22, 0.025)})
+
+
+# ----------------------------------------------------------------------------- property-based
+
+from hypothesis import HealthCheck, given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+TABLE_EPS = 3 * env2d.SLOP      # resting blocks may sink by the allowed penetration, no more
+
+
+def lowest_point(state):
+    """y of each block's lowest corner (n,): a rotated box reaches |cos a| h/2 + |sin a| w/2 below its centre."""
+    a = state[:, 2]
+    return state[:, 1] - 0.5 * (np.abs(np.cos(a)) * BLOCK_H + np.abs(np.sin(a)) * BLOCK_W)
+
+
+@st.composite
+def adversarial_action(draw, state):
+    """An action aimed where physics is most likely to break, given the current state (n, 6)."""
+    n = len(state)
+    b = draw(st.integers(0, n - 1))
+    kind = draw(st.sampled_from(["uniform", "into", "onto", "air", "edge"]))
+    if kind == "uniform":
+        return b, draw(st.integers(0, env2d.N_X - 1)), draw(st.integers(0, n - 1))
+    if kind == "edge":                                     # half over the table's edge, any height
+        return b, draw(st.sampled_from([0, 1, env2d.N_X - 2, env2d.N_X - 1])), draw(st.integers(0, n - 1))
+    if kind == "air":                                      # the top layer: a long fall
+        return b, draw(st.integers(0, env2d.N_X - 1)), n - 1
+    j = draw(st.integers(0, n - 1))                        # another block, maybe on a tall stack
+    ix = int(np.abs(env2d.X_BINS - state[j, 0]).argmin()) + draw(st.integers(-3, 3))
+    layer = int(np.clip(np.floor(state[j, 1] / BLOCK_H), 0, n - 1)) + (kind == "onto")
+    return b, int(np.clip(ix, 0, env2d.N_X - 1)), int(np.clip(layer, 0, n - 1))
+
+
+@settings(max_examples=250, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+@given(data=st.data(), n=st.integers(2, 8), seed=st.integers(0, 2**16), tower=st.booleans())
+def test_physics_never_breaks(data, n, seed, tower):
+    """Up to 40 actions per example, ~5000 in all: teleports into blocks, far in the air, at the table's
+    edge and onto tall stacks. After every action: finite state, every block on the table (not in
+    it) or on the catch floor, rest within the substep cap; at the end, exact replay from a saved state."""
+    env = BlockWorld(n, max_steps=10**6)
+    env.reset(seed=seed)
+    if tower:                                              # start from a tower as tall as it gets
+        for k, b in enumerate(range(1, n)):
+            env.step([b, int(np.abs(env2d.X_BINS - env.get_state()[0, 0]).argmin()), k + 1])
+    saved, actions, states = env.get_state(), [], []
+    for _ in range(data.draw(st.integers(1, 40), label="steps")):
+        action = data.draw(adversarial_action(env.get_state()), label="action")
+        _, _, _, _, info = env.step(action)
+        s = env.get_state()
+        actions.append(action)
+        states.append(s)
+        assert np.isfinite(s).all(), (action, s)
+        assert s.shape == (n, 6)
+        on_floor = s[:, 1] < -BLOCK_H                      # fell off: must lie on the catch floor
+        assert (lowest_point(s)[~on_floor] > -TABLE_EPS).all(), ("block in the table", action, s)
+        assert (lowest_point(s)[on_floor] > env2d.FLOOR_Y - TABLE_EPS).all(), ("block through the floor", s)
+        assert (np.abs(s[:, 0]) < 5).all(), ("block left the world", s)
+        assert info["noop"] or (info["stable"] and info["settle_steps"] <= env2d.MAX_SUBSTEPS), (action, info)
+    replay = BlockWorld(n, max_steps=10**6)
+    replay.reset(options={"state": saved, "goals": env.goals})
+    for action, s in zip(actions, states):
+        replay.step(action)
+        assert np.array_equal(replay.get_state(), s), action

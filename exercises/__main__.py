@@ -1,0 +1,6 @@
+"""python -m exercises {ex1..ex7 [NOTEBOOK] | all [DIR] | release OUT_DIR [SRC_DIR]}"""
+import sys
+
+from .notebooks import main
+
+sys.exit(main())

@@ -1,0 +1,369 @@
+"""Tests of the problem set (the exercises package, notebooks/exercises/): the checks must be able to fail.
+
+Every reference solution passes its check (the library's and the instructor notebooks'); every
+released stub fails it; plausible wrong answers -- a sign error, a missing mask, an off-by-one in
+GAE, ... -- fail it with a hint that names the mistake.  Also: the CLI, the release script, and
+the instructor notebooks run top to bottom (ex7, the behavioural check, runs twice: ~1-2 min)."""
+import copy
+import json
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import agent
+import exercises
+import taskexp
+from env2d import is_success
+
+R = exercises.REFERENCE
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(exercises.__file__)))   # the repository
+SIMPLE = ["ex1", "ex2", "ex3", "ex4", "ex5", "ex6"]          # all but the behavioural ex7
+
+
+def run_check(ex, *fns):
+    return exercises.CHECKS[ex](*fns)
+
+
+@pytest.fixture(scope="module")
+def released(tmp_path_factory):
+    out = tmp_path_factory.mktemp("release")
+    exercises.release(str(out))
+    return out
+
+
+# ---- reference solutions pass, stubs fail --------------------------------------------------------
+
+@pytest.mark.parametrize("ex", SIMPLE)
+def test_library_reference_passes(ex, capsys):
+    assert run_check(ex, *(R[f] for f in exercises.FUNCTIONS[ex]))
+    assert f"{ex} PASS" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("ex", SIMPLE)
+def test_instructor_notebook_solution_passes(ex):
+    assert run_check(ex, *exercises.functions(ex))
+
+
+@pytest.mark.parametrize("ex", SIMPLE + ["ex7"])
+def test_released_stub_fails(ex, released, capsys):
+    nb = os.path.join(released, exercises.NOTEBOOKS[ex])
+    assert not run_check(ex, *exercises.functions(ex, nb))
+    assert "NotImplementedError" in capsys.readouterr().out
+
+
+# ---- plausible wrong answers fail, with a hint that points at the mistake ------------------------
+
+def mlp_backward_variant(tanh_grad=lambda h: 1 - h ** 2, bias=lambda d: d.sum(0), last_tanh=False):
+    def backward(params, hs, dout):
+        L, grads, d = len(params) // 2, {}, dout
+        for k in reversed(range(L)):
+            if k < L - 1 or last_tanh:
+                d = d * tanh_grad(hs[k + 1])
+            grads[f"W{k}"], grads[f"b{k}"] = hs[k].T @ d, bias(d)
+            d = d @ params[f"W{k}"].T
+        return grads, d
+    return backward
+
+
+def naive_logp_entropy(out, actions, n_x):
+    """exp without subtracting the max: overflows for extreme logits."""
+    with np.errstate(all="ignore"):
+        ls = lambda z: np.log(np.exp(z) / np.exp(z).sum(-1, keepdims=True))
+        d = copy.copy(agent.ActionDist(out, n_x))
+        d.lb, d.lx, d.ly = ls(out[..., 0]), ls(out[..., 1:1 + n_x]), ls(out[..., 1 + n_x:])
+        d.pb = np.exp(d.lb)
+        d.hb, d.hx, d.hy = (-(np.exp(l) * l).sum(-1) for l in (d.lb, d.lx, d.ly))
+        return d.log_prob(actions), d.entropy()
+
+
+def unweighted_entropy(out, actions, n_x):
+    """H(b) + mean over blocks of the heads' entropies: forgets the weights pi(b)."""
+    d = agent.ActionDist(out, n_x)
+    return d.log_prob(actions), d.hb + (d.hx + d.hy).mean(-1)
+
+
+def backward_without_weight_term(out, actions, n_x, a, c):
+    """Drops pi(b) (K_b - Kbar) from dH/dl."""
+    d = agent.ActionDist(out, n_x)
+    dout = d.backward(actions, a, c)
+    K = d.hx + d.hy
+    dout[..., 0] -= c[:, None] * d.pb * (K - (d.pb * K).sum(-1, keepdims=True))
+    return dout
+
+
+def gae_variant(bootstrap="term", trace="done", next_from="next_values", shift=0):
+    def gae(r, v, te, tr, nv, gamma, lam):
+        done = np.maximum(te, tr)
+        mask_b = {"term": te, "done": done}[bootstrap]
+        mask_t = {"done": done, "term": te}[trace]
+        adv, last = np.zeros_like(r), np.zeros(r.shape[1:])
+        for t in reversed(range(len(r))):
+            nxt = nv[t] if next_from == "next_values" else (v[t + 1] if t + 1 < len(r) else 0 * v[t])
+            delta = r[t] + gamma * nxt * (1 - mask_b[t]) - v[t]
+            m = mask_t[t + shift] if t + shift < len(r) else 0 * v[t]
+            last = delta + gamma * lam * (1 - m) * last
+            adv[t] = last
+        return adv, adv + v
+    return gae
+
+
+def ppo_variant(sign=1.0, tie="<=", through_clip=False, outer=np.minimum):
+    def ppo_loss(out, actions, logp_old, adv, n_x, clip=0.2, ent_coef=0.0):
+        dist, B = agent.ActionDist(out, n_x), len(actions)
+        r = np.exp(dist.log_prob(actions) - logp_old)
+        u, c = r * adv, np.clip(r, 1 - clip, 1 + clip) * adv
+        L = -sign * outer(u, c).mean() - ent_coef * dist.entropy().mean()
+        use_u = u <= c if tie == "<=" else u < c
+        if outer is np.maximum:
+            use_u = u >= c
+        g = np.where(use_u, u, c if through_clip else 0.0)   # the clipped term has no gradient
+        return L, dist.backward(actions, -sign * g / B, -ent_coef / B)
+    return ppo_loss
+
+
+def alter_always_add(goals, env, rng):
+    new, free = dict(goals), [b for b in range(env.n_blocks) if b not in goals]
+    b = int(rng.choice(free)) if free else int(rng.choice(list(goals)))
+    new[b] = float(env.x_bins[rng.integers(37)]), float(env.y_bins[rng.integers(env.n_blocks)])
+    return new
+
+
+def alter_two_changes(goals, env, rng):
+    new = R["alter"](goals, env, rng)
+    return R["alter"](new, env, rng)
+
+
+def alter_in_place(goals, env, rng):
+    new = R["alter"](goals, env, rng)
+    goals.update(new)
+    return goals
+
+
+def alter_off_grid(goals, env, rng):
+    """Continuous x instead of the grid's bins."""
+    new, free = dict(goals), [b for b in range(env.n_blocks) if b not in goals]
+    b = int(rng.choice(free)) if free and rng.random() < 0.5 else int(rng.choice(list(goals)))
+    new[b] = float(rng.uniform(-0.45, 0.45)), float(env.y_bins[rng.integers(env.n_blocks)])
+    return new
+
+
+def alter_global_rng(goals, env, rng):
+    return R["alter"](goals, env, np.random.default_rng(np.random.randint(2 ** 31)))
+
+
+def select_end2new(ag, s0, sT, cands):
+    return int(np.argmax(ag.value(np.stack([taskexp.observation(sT, g) for g in cands]))))
+
+
+def select_reversed(ag, s0, sT, cands):
+    obs = lambda s: np.stack([taskexp.observation(s, g) for g in cands])
+    return int(np.argmax(ag.value(obs(s0)) - ag.value(obs(sT))))
+
+
+def relabel_no_cut(traj, env):
+    r = R["relabel"](traj, env)
+    return r and taskexp.Trajectory(r.goals, traj.states, traj.actions, True)
+
+
+def relabel_variant(blocks="goal", check_table=True):
+    def relabel(traj, env):
+        sT = traj.states[-1]
+        if check_table and not taskexp.on_table(sT, env):
+            return None
+        goals = {b: (float(sT[b, 0]), float(sT[b, 1]))
+                 for b in (traj.goals if blocks == "goal" else range(len(sT)))}
+        if is_success(traj.states[0], goals, env.threshold):
+            return None
+        T = next(t for t in range(1, len(traj.states)) if is_success(traj.states[t], goals, env.threshold))
+        return taskexp.Trajectory(goals, traj.states[:T + 1], traj.actions[:T], True)
+    return relabel
+
+
+WRONG = {   # (exercise, the student's functions with one mistake, a phrase the check must print)
+    "ex1 1 - h instead of 1 - h^2": ("ex1", [mlp_backward_variant(tanh_grad=lambda h: 1 - h)], "1 - h^2"),
+    "ex1 bias grad averaged": ("ex1", [mlp_backward_variant(bias=lambda d: d.mean(0))], "grads['b"),
+    "ex1 tanh' on the linear output": ("ex1", [mlp_backward_variant(last_tanh=True)], "no tanh"),
+    "ex2 softmax without max": ("ex2", [naive_logp_entropy, R["logp_entropy_backward"]], "log-sum-exp"),
+    "ex2 entropy unweighted": ("ex2", [unweighted_entropy, R["logp_entropy_backward"]], "sum_b pi(b)"),
+    "ex2 backward drops K_b - Kbar": ("ex2", [R["logp_entropy"], backward_without_weight_term], "K_b"),
+    "ex3 no bootstrap on truncation": ("ex3", [gae_variant(bootstrap="done")], "still bootstrap"),
+    "ex3 trace not cut at truncation": ("ex3", [gae_variant(trace="term")], "cut the recursion"),
+    "ex3 off by one: next step's done": ("ex3", [gae_variant(shift=1)], "flags of step t"),
+    "ex3 values[t+1] for V(s_t+1)": ("ex3", [gae_variant(next_from="values")], "next_values"),
+    "ex4 sign error": ("ex4", [ppo_variant(sign=-1.0)], "is minimised"),
+    "ex4 strict < at ratio 1": ("ex4", [ppo_variant(tie="<")], "at r = 1"),
+    "ex4 gradient through the clipped term": ("ex4", [ppo_variant(through_clip=True)], "no gradient"),
+    "ex4 max instead of min": ("ex4", [ppo_variant(outer=np.maximum)], "min of the two"),
+    "ex5 always add": ("ex5", [alter_always_add], "50/50"),
+    "ex5 two alterations": ("ex5", [alter_two_changes], "ONE"),
+    "ex5 changes its input": ("ex5", [alter_in_place], "dict(goals)"),
+    "ex5 off the grid": ("ex5", [alter_off_grid], "grid"),
+    "ex5 global random state": ("ex5", [alter_global_rng], "draw only from rng"),
+    "ex6 end2new": ("ex6", [select_end2new, R["relabel"]], "end2new"),
+    "ex6 sign reversed": ("ex6", [select_reversed, R["relabel"]], "reversed"),
+    "ex6 relabel without the cut": ("ex6", [R["select_goal"], relabel_no_cut], "cut at the first"),
+    "ex6 relabel every block": ("ex6", [R["select_goal"], relabel_variant(blocks="all")], "only those blocks"),
+    "ex6 relabel ignores falls": ("ex6", [R["select_goal"], relabel_variant(check_table=False)], "fell off"),
+}
+
+
+@pytest.mark.parametrize("name", list(WRONG))
+def test_wrong_answer_fails_with_a_hint(name, capsys):
+    ex, fns, phrase = WRONG[name]
+    assert not run_check(ex, *fns), name
+    out = capsys.readouterr().out
+    assert f"{ex} FAIL" in out, out
+    assert phrase in out, out
+
+
+def test_ex7_sign_error_in_ppo_fails(capsys):
+    """The behavioural check measures PPO's gain: a sign-flipped loss (which makes BC's policy
+    worse) must fail it.  One training run (~30-60 s)."""
+    assert not exercises.check_ex7(R["mlp_backward"], R["gae"], ppo_variant(sign=-1.0))
+    assert "after PPO" in capsys.readouterr().out
+    assert taskexp.gae is agent.gae and agent.MLP.backward is exercises._LIBRARY[0]   # restored
+
+
+def test_plugged_restores_the_library_after_an_error():
+    def boom(*args):
+        raise RuntimeError("boom")
+    saved = taskexp.gae, agent.ppo_loss, agent.MLP.backward
+    with pytest.raises(RuntimeError):
+        with exercises.plugged(boom, boom, boom):
+            assert taskexp.gae is boom
+            net = agent.MLP([2, 2])
+            net.forward(np.ones((1, 2)))
+            net.backward(np.ones((1, 2)))
+    assert (taskexp.gae, agent.ppo_loss, agent.MLP.backward) == saved
+
+
+def test_checks_are_deterministic(capsys):
+    for _ in range(2):
+        exercises.check_ex3(gae_variant(shift=1))
+        exercises.check_ex5(alter_always_add)
+    out = capsys.readouterr().out.splitlines()
+    assert out[: len(out) // 2] == out[len(out) // 2:]
+
+
+# ---- release and CLI -----------------------------------------------------------------------------
+
+SOLUTION = re.compile(r"^[ \t]*### BEGIN SOLUTION.*?### END SOLUTION[^\n]*\n?", re.M | re.S)
+STUB = re.compile(r"^[ \t]*# YOUR CODE HERE\n[ \t]*raise NotImplementedError\(\)\n?", re.M)
+
+
+def test_release_blanks_every_solution_and_keeps_the_rest(released):
+    for ex, name in exercises.NOTEBOOKS.items():
+        with open(os.path.join(exercises.NOTEBOOK_DIR, name)) as f:
+            src = json.load(f)
+        with open(os.path.join(released, name)) as f:
+            out = json.load(f)
+        assert len(src["cells"]) == len(out["cells"]) and src["metadata"] == out["metadata"]
+        for a, b in zip(src["cells"], out["cells"]):
+            sa, sb = "".join(a["source"]), "".join(b["source"])
+            assert a["metadata"] == b["metadata"] and a["cell_type"] == b["cell_type"]
+            assert "BEGIN SOLUTION" not in sb and "END SOLUTION" not in sb
+            assert len(SOLUTION.findall(sa)) == len(STUB.findall(sb))      # one stub per solution
+            assert SOLUTION.sub("", sa) == STUB.sub("", sb)                 # nothing else changed
+            if b["cell_type"] == "code":
+                assert b["outputs"] == [] and b["execution_count"] is None
+        solutions = [c for c in src["cells"] if c["metadata"]["nbgrader"]["solution"]]
+        assert all("### BEGIN SOLUTION" in "".join(c["source"]) for c in solutions)
+        assert ex == "ex7" or solutions
+        checks = [c for c in src["cells"] if c["metadata"]["nbgrader"]["grade"]]
+        assert len(checks) == 1 and checks[0]["metadata"]["nbgrader"]["points"] > 0
+        assert f"check_{ex}" in "".join(checks[0]["source"])
+
+
+def test_blank_keeps_the_indentation():
+    src = "def f(x):\n    y = 1\n    ### BEGIN SOLUTION\n    return x\n    ### END SOLUTION\n"
+    assert exercises.blank(src) == "def f(x):\n    y = 1\n    # YOUR CODE HERE\n    raise NotImplementedError()\n"
+
+
+def cli(*args):
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    return subprocess.run([sys.executable, "-m", "exercises", *args], cwd=ROOT, env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
+def test_cli_passes_on_the_instructor_notebook_and_fails_on_a_stub(released):
+    ok = cli("ex3")
+    assert ok.returncode == 0 and "ex3 PASS" in ok.stdout, ok.stdout + ok.stderr
+    bad = cli("ex3", str(released / exercises.NOTEBOOKS["ex3"]))
+    assert bad.returncode == 1 and "ex3 FAIL" in bad.stdout and "NotImplementedError" in bad.stdout
+    assert cli("ex9").returncode == 2 and cli().returncode == 2
+
+
+def test_cli_release(tmp_path):
+    res = cli("release", str(tmp_path))
+    assert res.returncode == 0
+    assert sorted(os.listdir(tmp_path)) == sorted(exercises.NOTEBOOKS.values())
+    assert cli("release", exercises.NOTEBOOK_DIR).returncode == 2         # never over the solutions
+
+
+GAE_BY_SUMS = """
+    # A_t = sum_k (gamma lam)^k delta_{t+k}, summed forwards until the episode ends
+    T, N = np.shape(rewards)
+    delta = rewards + gamma * next_values * (1 - terminated) - values
+    adv = np.zeros((T, N))
+    for n in range(N):
+        for t in range(T):
+            w = 1.0
+            for u in range(t, T):
+                adv[t, n] += w * delta[u, n]
+                if terminated[u, n] or truncated[u, n]:
+                    break
+                w *= gamma * lam
+    return adv, adv + values
+"""
+
+
+def test_a_student_who_fills_in_a_different_correct_answer_passes(released, tmp_path):
+    """Release -> the student replaces the stub (here by GAE as explicit sums, not the recursion) -> pass."""
+    with open(released / exercises.NOTEBOOKS["ex3"]) as f:
+        nb = json.load(f)
+    for cell in nb["cells"]:
+        src = "".join(cell["source"])
+        if "raise NotImplementedError()" in src:
+            cell["source"] = src.replace("    # YOUR CODE HERE\n    raise NotImplementedError()", GAE_BY_SUMS)
+    path = tmp_path / "my_ex3.ipynb"
+    path.write_text(json.dumps(nb))
+    res = cli("ex3", str(path))
+    assert res.returncode == 0 and "ex3 PASS" in res.stdout, res.stdout + res.stderr
+
+
+# ---- the instructor notebooks run top to bottom (ex7: the one reference run of the behaviour) ------
+
+@pytest.mark.parametrize("ex", list(exercises.NOTEBOOKS))
+def test_instructor_notebook_executes(ex):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    path = os.path.join(exercises.NOTEBOOK_DIR, exercises.NOTEBOOKS[ex])
+    nb = nbformat.read(path, as_version=4)
+    nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
+                            resources={"metadata": {"path": exercises.NOTEBOOK_DIR}}).execute()
+    text = "".join(o.get("text", "") for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", []))
+    assert f"{ex} PASS" in text, text
+
+
+def test_cells_carry_valid_nbgrader_metadata():
+    """nbgrader's schema-3 rules (nbgrader/nbgraderformat/v3.py and v3.json), checked without nbgrader:
+    known keys only; an id of [A-Za-z0-9_-] on every graded, solution or locked cell, unique per
+    notebook; points on graded cells; no markdown cell that is only graded or only a solution."""
+    keys = {"schema_version", "grade", "locked", "solution", "task", "grade_id", "points"}
+    for name in exercises.NOTEBOOKS.values():
+        with open(os.path.join(exercises.NOTEBOOK_DIR, name)) as f:
+            cells = json.load(f)["cells"]
+        ids = [c["metadata"]["nbgrader"].get("grade_id") for c in cells]
+        assert len(ids) == len(set(ids)), name
+        for cell in cells:
+            m = cell["metadata"]["nbgrader"]
+            assert set(m) <= keys and m["schema_version"] == 3, (name, m)
+            assert all(isinstance(m[k], bool) for k in ("grade", "locked", "solution", "task"))
+            assert re.fullmatch(r"[A-Za-z0-9_\-]+", m["grade_id"]), (name, m)
+            assert not m["grade"] or m["points"] >= 0
+            assert cell["cell_type"] == "code" or m["grade"] == m["solution"], (name, m)
+            assert not (m["solution"] and m["locked"]), (name, m)    # the student must edit it

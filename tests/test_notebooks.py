@@ -1,0 +1,79 @@
+"""The notebooks under notebooks/ run top to bottom in quick mode, and env2d.animate works.
+
+Each notebook is executed in memory with nbclient (kernel "python3", working directory notebooks/,
+TASKEXP_QUICK=1), so nothing is written into the repository: quick mode keeps its runs in
+temporary directories. A cell that raises fails the test.
+"""
+import glob
+import io
+import os
+import re
+
+import nbformat
+import numpy as np
+import pytest
+from nbclient import NotebookClient
+from PIL import Image
+
+from env2d import BlockWorld, animate
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+NOTEBOOKS = sorted(glob.glob(os.path.join(ROOT, "notebooks", "*.ipynb")))
+
+
+def test_the_five_notebooks_are_there():
+    names = [os.path.basename(p) for p in NOTEBOOKS]
+    assert [n[:2] for n in names] == ["01", "02", "03", "04", "05"], names
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=os.path.basename)
+def test_notebook_is_small_and_has_the_quick_switch(path):
+    assert os.path.getsize(path) < 3 * 2**20, "a committed notebook must stay under 3 MB"
+    nb = nbformat.read(path, as_version=4)
+    assert "TASKEXP_QUICK" in nb.cells[1].source, "the first code cell holds the quick switch"
+    assert "PROVENANCE" not in nb.cells[0].source, "the first cell must say how its outputs were made"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=os.path.basename)
+def test_notebook_runs_in_quick_mode(path, monkeypatch, tmp_path):
+    monkeypatch.setenv("TASKEXP_QUICK", "1")
+    monkeypatch.setenv("TASKEXP_RUNS", str(tmp_path / "runs"))     # never read the repository's runs/
+    monkeypatch.setenv("TMPDIR", str(tmp_path))                     # quick mode's runs land here
+    monkeypatch.setenv("MPLBACKEND", "module://matplotlib_inline.backend_inline")
+    nb = nbformat.read(path, as_version=4)
+    for cell in nb.cells:
+        if cell.cell_type == "code":
+            cell.outputs = []
+    # raises CellExecutionError (naming the cell) on the first cell that raises
+    NotebookClient(nb, timeout=600, kernel_name="python3",
+                   resources={"metadata": {"path": os.path.dirname(path)}}).execute()
+    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"]
+    assert not errors
+    assert any(o.output_type == "display_data" for c in nb.cells if c.cell_type == "code" for o in c.outputs), \
+        "a notebook that shows no picture"
+
+
+def test_animate_gif_frames_and_html():
+    env = BlockWorld(4)
+    env.reset(seed=1)
+    states = [env.get_state()]
+    for block, k in [(0, 0), (1, 1)]:
+        env.step(env.encode_action(block, 0.3, env.y_bins[k]))
+        states.append(env.get_state())
+    gif = animate(states, env.goals, fps=4)
+    im = Image.open(io.BytesIO(gif))
+    assert im.format == "GIF" and im.n_frames == len(states)
+    durations = []
+    for i in range(im.n_frames):
+        im.seek(i)
+        durations.append(im.info["duration"])
+    assert durations == [250, 250, 750]                  # the last frame is held 3x
+    # per-frame goals and titles; html=True wraps the same bytes in an <img> tag
+    html = animate(np.stack(states), [None, env.goals, {1: (0.3, 0.075)}], ["a", "b", "c"], html=True)
+    assert html.startswith('<img src="data:image/gif;base64,') and html.endswith('">')
+
+
+def test_the_library_never_imports_from_notebooks():
+    for path in glob.glob(os.path.join(ROOT, "*.py")):
+        with open(path) as f:
+            assert not re.search(r"^\s*(from|import)\s+notebooks", f.read(), re.M), path
