@@ -2,12 +2,12 @@
 the library, must train the base policy (sec 4.1) past a measured bar within a fixed budget.  ~90 lines.
 
 BC alone would already solve many base tasks, and then a broken PPO could pass.  So BC is kept weak
-on purpose (3000 demos, 8 epochs: 14-22% greedy success on 200 held-out base tasks), and the check
+on purpose (3000 demos, 8 epochs: 14-25% greedy success on 200 held-out base tasks), and the check
 asks for success after PPO >= threshold AND >= BC alone + min_gain: PPO's own contribution.
 Measured (notebooks/exercises/measure_ex7.py, one core, 30-55 s a run): the library's pieces reach
-62-73% over seeds 0-4 (+41 to +54 points); a sign-flipped ppo_loss, an inverted clip mask, a
-surrogate without gradient, a sign-flipped GAE delta and an MLP backward without tanh' all end at
-0-12%, below their BC start.  The full table is in notebooks/exercises/ex7_base_policy.ipynb.
+59-79% over seeds 0-4 (+43 to +59.5 points); on seed 0 a sign-flipped ppo_loss, an inverted clip mask,
+a surrogate without gradient, a sign-flipped GAE delta and an MLP backward without tanh' all end at
+1-9%, below their BC start.  The full table is in notebooks/exercises/ex7_base_policy.ipynb.
 """
 import contextlib
 import time
