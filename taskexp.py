@@ -487,11 +487,15 @@ class Progress:
 
 
 def save_json(path, obj):
-    """Write JSON atomically: a run killed mid-write leaves the previous file intact."""
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        json.dump(obj, f, indent=1)
-    os.replace(tmp, path)
+    """Write JSON atomically, like agent.save_npz: a run killed mid-write leaves the previous file intact."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    try:
+        with open(tmp, "w") as f:
+            json.dump(obj, f, indent=1)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
 
 
 @contextmanager
@@ -551,6 +555,10 @@ def save_state(path, k, agent, rng, kept, results):
     agent.save(path, extra=arrays)
 
 
+class ResumeError(ValueError):
+    """state.npz is missing, unreadable, or from a run with other settings."""
+
+
 def load_state(path, cfg, agent, rng):
     """Read what save_state wrote, for an agent like `agent`; restore rng -> (agent, round,
     results, kept). ValueError naming the file when it is unreadable or from other settings."""
@@ -587,7 +595,12 @@ def run(cfg, out_dir, log=print, resume=False):
     evals = eval_tasks(cfg, envs[0], cfg.seed)
     state_path = os.path.join(out_dir, "state.npz")
     if resume:
-        agent, done, results, kept = load_state(state_path, cfg, agent, rng)
+        try:
+            agent, done, results, kept = load_state(state_path, cfg, agent, rng)
+        except (OSError, ValueError) as e:
+            raise ResumeError(f"cannot resume: {e}") from None
+        # state.npz is written before results.json, so a kill between the two leaves results.json a round behind
+        save_json(os.path.join(out_dir, "results.json"), results)
         log(f"resuming {out_dir} after round {done}")
     else:
         done, results, kept = -1, dict(config=asdict(cfg), rounds=[], wallclock={}), {}
@@ -785,16 +798,19 @@ def main(argv=None):
     try:
         with threadpool_limits(limits=1):
             results = run(cfg, out, resume=resume)
+        print()
+        print(tables(results))
+        for path in figures(results, out):
+            print("wrote", path)
     except KeyboardInterrupt:
         print(f"\ninterrupted; {last_round(out)}", file=sys.stderr)
         sys.exit(130)
+    except ResumeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
     except FloatingPointError as e:
         print(f"\nerror: training diverged: {e}\n{last_round(out)}", file=sys.stderr)
         sys.exit(1)
-    print()
-    print(tables(results))
-    for path in figures(results, out):
-        print("wrote", path)
     print(f"wrote {out}/results.json and round0..{cfg.rounds}.npz in {results['wallclock']['total_s']:.0f}s")
 
 

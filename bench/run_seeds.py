@@ -20,12 +20,23 @@ FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"]}
 
 
+def last_round(out):
+    """The last round saved in out/results.json, or -1 if there is none."""
+    try:
+        with open(os.path.join(out, "results.json")) as f:
+            return json.load(f)["rounds"][-1]["round"]
+    except (OSError, ValueError, KeyError, IndexError):
+        return -1
+
+
 def run_one(variant, seed, rounds, root, extra_args):
+    """Finished runs are reused, stopped ones resumed (same results as if never stopped)."""
     out = os.path.join(root, f"{variant}-seed{seed}")
-    if not os.path.exists(os.path.join(out, "results.json")):         # finished runs are reused
-        cmd = [sys.executable, os.path.join(HERE, "..", "taskexp.py"), "--rounds", str(rounds),
-               "--seed", str(seed), "--out", out, *FLAGS[variant], *extra_args]
-        with open(out + ".log", "w") as log:
+    done = last_round(out)
+    if done < rounds:
+        cmd = [sys.executable, os.path.join(HERE, "..", "taskexp.py"), "--rounds", str(rounds), "--out", out]
+        cmd += ["--resume"] if done >= 0 else ["--seed", str(seed), *FLAGS[variant], *extra_args]
+        with open(out + ".log", "a" if done >= 0 else "w") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
     with open(os.path.join(out, "results.json")) as f:
         return variant, seed, json.load(f)

@@ -277,6 +277,14 @@ def check_ex4(ppo_loss):
 
 # ---- ex5: one-alteration task sampling (sec 4.2) -------------------------------------------------
 
+def as_goals(goals):
+    """{block: (x, y)} with plain ints and floats, so dicts of numpy values compare with ==."""
+    out = {int(b): tuple(map(float, p)) for b, p in goals.items()}
+    if any(len(p) != 2 for p in out.values()):
+        raise ValueError("a goal position is a pair (x, y)")
+    return out
+
+
 def check_ex5(alter, samples=400):
     """alter(goals, env, rng) -> a new goal dict: exactly one goal added or one goal modified."""
     rep = Report("ex5")
@@ -301,11 +309,16 @@ def check_ex5(alter, samples=400):
             except Exception as e:
                 problem, hint = f"raised {type(e).__name__}: {e}", "with no free block you can only modify"
                 break
-            if goals != before:
+            if len(goals) != len(before) or any(not np.array_equal(goals.get(b), p) for b, p in before.items()):
                 problem, hint = f"changed its input to {goals}", "copy the dict first: new = dict(goals)"
                 break
             if not isinstance(new, dict) or not set(goals) <= set(new) or not set(new) <= set(range(n)):
                 problem, hint = f"sample {i}: {new}", "keep every goal of the input; add only blocks 0..n-1"
+                break
+            try:                                        # numpy positions are fine; compare them as floats
+                new = as_goals(new)
+            except (TypeError, ValueError):
+                problem, hint = f"sample {i}: {new}", "a goal position is a pair of numbers (x, y)"
                 break
             add = [b for b in new if b not in goals]
             mod = [b for b in goals if not np.allclose(new[b], goals[b])]
@@ -334,7 +347,7 @@ def check_ex5(alter, samples=400):
             elif len(xs) < 30 or len(ys) < n:
                 problem, hint = f"used only {len(xs)} of 37 x-bins and {len(ys)} of {n} layers", grid
         if problem is None:                             # reproducible: only the rng passed in
-            draw = lambda: [alter(goals, env, np.random.default_rng(seed)) for _ in range(5)]
+            draw = lambda: [as_goals(alter(goals, env, np.random.default_rng(seed))) for _ in range(5)]
             if draw() != draw():
                 problem, hint = "two runs with the same seed differ", "draw only from rng, not np.random or random"
         rep.case(name, detail, problem, hint)

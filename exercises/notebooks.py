@@ -109,6 +109,10 @@ def main(argv=None):
             print(f"{ex} FAIL: could not run the notebook's cells: {type(e).__name__}: {e}")
             ok.append(False)
             continue
-        ok.append(CHECKS[ex](*fns))
+        try:
+            ok.append(CHECKS[ex](*fns))
+        except Exception as e:                     # a check the student's answer crashed still says FAIL
+            print(f"{ex} FAIL: the check stopped: {type(e).__name__}: {e}")
+            ok.append(False)
     return 0 if all(ok) else 1
 

@@ -241,6 +241,20 @@ def test_plugged_restores_the_library_after_an_error():
     assert (taskexp.gae, agent.ppo_loss, agent.MLP.backward) == saved
 
 
+def test_ex5_takes_numpy_positions(capsys):
+    """A right answer that stores positions as numpy arrays passes; one that also changes its input
+    in place fails with the hint rather than crashing the check."""
+    def alter_numpy(goals, env, rng):
+        return {b: np.array(p) for b, p in R["alter"](goals, env, rng).items()}
+
+    def alter_numpy_in_place(goals, env, rng):
+        goals.update(alter_numpy(goals, env, rng))
+        return goals
+    assert exercises.check_ex5(alter_numpy)
+    assert not exercises.check_ex5(alter_numpy_in_place)
+    assert "dict(goals)" in capsys.readouterr().out
+
+
 def test_checks_are_deterministic(capsys):
     for _ in range(2):
         exercises.check_ex3(gae_variant(shift=1))

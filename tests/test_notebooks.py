@@ -31,7 +31,9 @@ def test_notebook_is_small_and_has_the_quick_switch(path):
     assert os.path.getsize(path) < 3 * 2**20, "a committed notebook must stay under 3 MB"
     nb = nbformat.read(path, as_version=4)
     assert "TASKEXP_QUICK" in nb.cells[1].source, "the first code cell holds the quick switch"
-    assert "PROVENANCE" not in nb.cells[0].source, "the first cell must say how its outputs were made"
+    first = nb.cells[0].source
+    assert "PROVENANCE" not in first and "How these outputs were made" in first and "jupyter execute" in first, \
+        "the first cell must say which command made its outputs and how long it took"
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=os.path.basename)

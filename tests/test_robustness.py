@@ -68,7 +68,7 @@ def test_blocks_flag_names_the_run_and_reaches_the_world(tmp_path):
 
 # ----------------------------------------------------------------------------- nothing lost
 
-def test_killed_run_resumes_to_the_same_results(tmp_path):
+def test_killed_run_resumes_to_the_same_results(tmp_path, capsys):
     """SIGKILL in round 2 (after round 1 is saved), then --resume: results.json and every checkpoint
     equal those of a run never stopped."""
     whole, killed = str(tmp_path / "whole"), str(tmp_path / "killed")
@@ -80,14 +80,18 @@ def test_killed_run_resumes_to_the_same_results(tmp_path):
     p.kill()
     p.communicate()
     assert not os.path.exists(os.path.join(killed, "round3.npz"))
+    capsys.readouterr()
     taskexp.main(["--resume", "--out", killed])
+    log = capsys.readouterr().out
+    # went on from the saved round rather than starting again (which would also give equal files)
+    assert f"resuming {killed} after round " in log and "[round 0]" not in log and "round 1:" not in log
     assert results_without_clock(killed) == results_without_clock(whole)
     for k in range(4):
         with open(os.path.join(killed, f"round{k}.npz"), "rb") as a, open(os.path.join(whole, f"round{k}.npz"), "rb") as b:
             assert a.read() == b.read(), k
 
 
-def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path):
+def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
     """A 1-round run extended to 2 equals a 2-round run; a state from other settings is refused."""
     one, two = str(tmp_path / "one"), str(tmp_path / "two")
     taskexp.main(["--rounds", "1", *TINY, "--out", one])
@@ -101,6 +105,11 @@ def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path):
         f.truncate(1000)
     with pytest.raises(ValueError, match="state.npz: not a readable"):
         taskexp.run(taskexp.parse_args(["--resume", "--rounds", "3", "--out", one])[0], one, resume=True)
+    capsys.readouterr()
+    with pytest.raises(SystemExit) as e:                      # the CLI says it in one line
+        taskexp.main(["--resume", "--rounds", "3", "--out", one])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert e.value.code == 2 and len(err) == 1 and "cannot resume" in err[0] and "state.npz: not a readable" in err[0]
 
 
 def test_ctrl_c_stops_cleanly_and_says_how_to_resume(tmp_path):
@@ -125,6 +134,7 @@ def test_tasks_survive_the_state_file_with_their_goal_order():
 
 # ----------------------------------------------------------------------------- numerics
 
+@pytest.mark.filterwarnings("ignore::RuntimeWarning")     # the overflow is the point of the test
 def test_nan_in_training_stops_with_phase_and_step():
     rng = np.random.default_rng(0)
     obs, acts = rng.normal(size=(40, 6, 6)), np.zeros((40, 3), np.int64)
