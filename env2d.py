@@ -1,4 +1,4 @@
-"""env2d.py -- the 2D side-view block world of taskexp (pymunk physics, Gymnasium API). ~390 lines.
+"""env2d.py -- the 2D side-view block world of taskexp (pymunk physics, Gymnasium API). ~420 lines.
 
 The world of "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu), sec 5,
 seen from the side: n_blocks rigid blocks (10 cm x 5 cm, 0.1 kg) on a table one metre wide, under
@@ -393,3 +393,32 @@ def _free_segments(goal_xs):
     if lo < TABLE_X[1]:
         segments.append((lo, TABLE_X[1]))
     return segments
+
+
+# --------------------------------------------------------------------------------------------
+# Stress actions: shared by the property test (tests/test_env2d.py, drawing through hypothesis)
+# and bench/bench_settle.py (drawing from a numpy Generator), so both drive the same distribution
+# --------------------------------------------------------------------------------------------
+
+def stack_tower(env):
+    """Stack every block on block 0, one layer each: a tower as tall as the world allows."""
+    for k, b in enumerate(range(1, env.n_blocks)):
+        env.step([b, int(np.abs(X_BINS - env.get_state()[0, 0]).argmin()), k + 1])
+
+
+def adversarial_action(state, integers, choice):
+    """An action (block, x-bin, layer) aimed where physics is most likely to break, given the current
+    state (n, 6). integers(lo, hi) draws an int in [lo, hi]; choice(seq) draws an element of seq."""
+    n = len(state)
+    b = integers(0, n - 1)
+    kind = choice(["uniform", "into", "onto", "air", "edge"])
+    if kind == "uniform":
+        return b, integers(0, N_X - 1), integers(0, n - 1)
+    if kind == "edge":                                     # half over the table's edge, any height
+        return b, choice([0, 1, N_X - 2, N_X - 1]), integers(0, n - 1)
+    if kind == "air":                                      # the top layer: a long fall
+        return b, integers(0, N_X - 1), n - 1
+    j = integers(0, n - 1)                                 # another block, maybe on a tall stack
+    ix = int(np.abs(X_BINS - state[j, 0]).argmin()) + integers(-3, 3)
+    layer = int(np.clip(np.floor(state[j, 1] / BLOCK_H), 0, n - 1)) + (kind == "onto")
+    return b, int(np.clip(ix, 0, N_X - 1)), int(np.clip(layer, 0, n - 1))
