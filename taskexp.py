@@ -783,12 +783,19 @@ def parse_args(argv=None):
     return cfg, out, False
 
 
-def last_round(out):
-    """What a stopped run left in `out`, and how to go on from it."""
+def saved_round(out):
+    """The last complete round of the run in `out` (from its results.json), or -1 if there is none."""
     try:
         with open(os.path.join(out, "results.json")) as f:
-            k = json.load(f)["rounds"][-1]["round"]
+            return json.load(f)["rounds"][-1]["round"]
     except (OSError, ValueError, KeyError, IndexError):
+        return -1
+
+
+def last_round(out):
+    """What a stopped run left in `out`, and how to go on from it."""
+    k = saved_round(out)
+    if k < 0:
         return f"no round was complete, so there is nothing to resume in {out}."
     return f"rounds 0..{k} are saved in {out}; go on with:\n    python taskexp.py --resume --out {out}"
 

@@ -16,25 +16,19 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
+import taskexp  # noqa: E402
+
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"]}
-
-
-def last_round(out):
-    """The last round saved in out/results.json, or -1 if there is none."""
-    try:
-        with open(os.path.join(out, "results.json")) as f:
-            return json.load(f)["rounds"][-1]["round"]
-    except (OSError, ValueError, KeyError, IndexError):
-        return -1
 
 
 def run_one(variant, seed, rounds, root, extra_args):
     """Finished runs are reused, stopped ones resumed (same results as if never stopped)."""
     out = os.path.join(root, f"{variant}-seed{seed}")
-    done = last_round(out)
+    done = taskexp.saved_round(out)
     if done < rounds:
-        cmd = [sys.executable, os.path.join(HERE, "..", "taskexp.py"), "--rounds", str(rounds), "--out", out]
+        cmd = [sys.executable, taskexp.__file__, "--rounds", str(rounds), "--out", out]
         cmd += ["--resume"] if done >= 0 else ["--seed", str(seed), *FLAGS[variant], *extra_args]
         with open(out + ".log", "a" if done >= 0 else "w") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
