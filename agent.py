@@ -15,26 +15,53 @@ import os
 import zipfile
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
-FORMAT_VERSION = 1
+from env2d import BLOCK_H, BLOCK_W, GEOMETRY, TABLE_X, THRESHOLD, layer
+
+# The networks' matmuls are tiny: with more than one BLAS thread they run 10-100x slower, and
+# results change with the thread count. One thread, for every program that imports the agent.
+threadpool_limits(limits=1)
+
+FORMAT_VERSION = 2              # 2: the header records the world's GEOMETRY
 N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the table
 
 
 # ---- Building blocks: MLP, Adam, gradient clipping ---------------------------------------
+
+def mlp_backward(params, hs, dout):
+    """The backward pass of MLP: params {"W0", "b0", ...}, hs the cached layer outputs
+    [x, h_1, ..., out], dout (B, out) = dL/d(out)
+    -> (grads {key: array like params}, dL/dx (B, in)).
+
+    A function of its own so that a student's version (exercise 1) can be passed to MLP.
+    """
+    grads, d, n_layers = {}, dout, len(hs) - 1
+    for k in reversed(range(n_layers)):
+        if k < n_layers - 1:
+            d = d * (1.0 - hs[k + 1] ** 2)                # tanh'(z) = 1 - tanh(z)^2
+        grads[f"W{k}"] = hs[k].T @ d                      # dL/dW = h^T dz
+        grads[f"b{k}"] = d.sum(0)
+        d = d @ params[f"W{k}"].T                         # dL/dh = dz W^T
+    return grads, d
+
 
 class MLP:
     """tanh hidden layers, linear output.  h_{k+1} = tanh(h_k W_k + b_k); out = h_{L-1} W + b.
 
     W_k ~ N(0, 1/fan_in) keeps pre-activations O(1); the last layer is scaled by out_scale
     (0.01 for policy logits: a near-uniform initial policy explores every block and bin).
+    backward_fn(params, hs, dout) -> (grads, dx) is the backward pass (default mlp_backward).
     """
 
-    def __init__(self, sizes, seed=0, out_scale=1.0):
+    def __init__(self, sizes, seed=0, out_scale=1.0, backward_fn=mlp_backward):
         rng = np.random.default_rng(seed)
         self.sizes, self.n_layers, self.params = list(sizes), len(sizes) - 1, {}
+        self.backward_fn = backward_fn
         for k, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
             scale = out_scale if k == self.n_layers - 1 else 1.0
-            self.params[f"W{k}"] = rng.standard_normal((fan_in, fan_out)) * (scale / np.sqrt(fan_in))
+            W = rng.standard_normal((fan_in, fan_out))
+            self.params[f"W{k}"] = W * (scale / np.sqrt(fan_in))
             self.params[f"b{k}"] = np.zeros(fan_out)
 
     def forward(self, x):
@@ -47,14 +74,7 @@ class MLP:
 
     def backward(self, dout):
         """dout (B, out) = dL/d(out) -> grads {key: array like params}; sets self.dx (B, in)."""
-        grads, d = {}, dout
-        for k in reversed(range(self.n_layers)):
-            if k < self.n_layers - 1:
-                d = d * (1.0 - self.hs[k + 1] ** 2)          # tanh'(z) = 1 - tanh(z)^2
-            grads[f"W{k}"] = self.hs[k].T @ d                 # dL/dW = h^T dz
-            grads[f"b{k}"] = d.sum(0)
-            d = d @ self.params[f"W{k}"].T                    # dL/dh = dz W^T
-        self.dx = d
+        grads, self.dx = self.backward_fn(self.params, self.hs, dout)
         return grads
 
 
@@ -99,58 +119,85 @@ def clip_grad_norm(grads, max_norm):
 
 # ---- Features and the set network (sec 3: one shared network per block, pooled context) ----
 
-def featurize(obs, n_y=None, block_size=(0.10, 0.05), table_x=(-0.5, 0.5), threshold=0.02):
-    """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, 15 + 2 n_y + 3 N_RBF).
+# The feature layout: (name, width) of each column group, in order; n_y is the number of layers.
+# Tests and notebooks find a feature by name (feature_columns), never by its column number.
+def feature_layout(n_y):
+    return [("x", 1), ("y", 1), ("cos", 1), ("sin", 1), ("has_goal", 1), ("goal_x", 1),
+            ("goal_y", 1), ("to_goal_x", 1), ("to_goal_y", 1), ("at_goal", 1),
+            ("layer", n_y), ("goal_layer", n_y), ("x_rbf", N_RBF), ("goal_x_rbf", N_RBF),
+            *[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
+
+
+def feature_columns(n_y):
+    """{feature name: slice of its columns} for features made with n_y layers."""
+    out, start = {}, 0
+    for name, width in feature_layout(n_y):
+        out[name], start = slice(start, start + width), start + width
+    return out
+
+
+def featurize(obs, n_y=None):
+    """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, F), laid out as
+    feature_layout(n_y) says (F = 15 + 2 n_y + 3 N_RBF).
 
     Besides normalised pose, goal and offset to goal, each block gets one-hot codes of its layer
     and goal layer and RBF codes of its x and goal x.  Mean/max pooling of their embeddings then
     gives every block a map of where the blocks and goals are, which it needs to decide where
     a support must go.  Goal columns are multiplied by has_goal, so "no goal" is all zeros.
+    The world's geometry comes from env2d.
     """
     obs = np.asarray(obs, dtype=np.float64)
     if obs.ndim != 3 or obs.shape[-1] != 6:
         raise ValueError(f"obs must have shape (B, n, 6), got {obs.shape}")
     n_y = obs.shape[1] if n_y is None else n_y
-    w, h = block_size
-    half, mid = (table_x[1] - table_x[0]) / 2, (table_x[1] + table_x[0]) / 2
+    w, h = BLOCK_W, BLOCK_H
+    half, mid = (TABLE_X[1] - TABLE_X[0]) / 2, (TABLE_X[1] + TABLE_X[0]) / 2
     x, y, ang, gx, gy, g = (obs[..., j] for j in range(6))
     g = (g > 0.5).astype(np.float64)
     dist = np.hypot(gx - x, gy - y)
-    layer = lambda v: np.clip(np.round(v / h - 0.5), 0, n_y - 1).astype(np.int64)
-    onehot = lambda k: np.eye(n_y)[k]                                   # (B, n) -> (B, n, n_y)
-    centres = np.linspace(table_x[0], table_x[1], N_RBF)
+    onehot_layer = lambda v: np.eye(n_y)[np.clip(layer(v), 0, n_y - 1)]    # (B, n) -> (B, n, n_y)
+    centres = np.linspace(TABLE_X[0], TABLE_X[1], N_RBF)
     rbf = lambda v: np.exp(-0.5 * ((v[..., None] - centres) / (w / 4)) ** 2)
-    sat = g * (dist < threshold)
+    at_goal = g * (dist < THRESHOLD)
     cols = [(x - mid) / half, y / (n_y * h), np.cos(ang), np.sin(ang), g,
-            g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h, sat]
-    rel, needs_support = relations(x, y, gx, gy, g, sat, w, h)
-    return np.concatenate([np.stack(cols, -1), onehot(layer(y)), g[..., None] * onehot(layer(gy)),
-                           rbf(x), g[..., None] * rbf(gx), rel, needs_support[..., None] * rbf(gx)],
-                          axis=-1)
+            g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h, at_goal]
+    rel = relations(x, y, gx, gy, g, at_goal)
+    return np.concatenate([np.stack(cols, -1), onehot_layer(y), g[..., None] * onehot_layer(gy),
+                           rbf(x), g[..., None] * rbf(gx),
+                           np.stack([rel[name] for name in RELATIONS], -1),
+                           rel["needs_support"][..., None] * rbf(gx)], axis=-1)
 
 
-def relations(x, y, gx, gy, g, sat, w, h):
+# Hand-computed stacking preconditions: what self-attention over blocks would have to learn.
+RELATIONS = ("blocked", "supported", "wait", "first", "covered")
+
+
+def relations(x, y, gx, gy, g, at_goal):
     """Pairwise facts about blocks and goals, pooled over the other blocks j (what attention finds).
 
-    All inputs (B, n).  Returns rel (B, n, 5) and needs_support (B, n):
+    All inputs (B, n).  Returns {name: (B, n)} for the RELATIONS and needs_support:
       blocked     another block overlaps my goal spot now (placing me there would be a no-op)
       supported   my goal is on the table, or another block rests right under my goal spot now
       wait        another unreached goal lies under mine: that block must go first
       first       my goal lies under another block's goal: I am its support
       covered     a block rests on me now
-    needs_support = has goal, not reached, not supported: a free block must go under it, and
-    the RBF code of its goal x (pooled) tells the free blocks where.
+      needs_support  has goal, not reached, not supported: a free block must go under it, and
+                  the RBF code of its goal x (pooled) tells the free blocks where
     """
+    w, h = BLOCK_W, BLOCK_H
     other = 1.0 - np.eye(x.shape[1])                                   # (n, n): j != i
-    near = lambda a, b, tol: (np.abs(a[:, None, :] - b[:, :, None]) < tol)    # (B, i, j): |a_j - b_i|
+    # (B, i, j): is |a_j - b_i| < tol
+    near = lambda a, b, tol: (np.abs(a[:, None, :] - b[:, :, None]) < tol)
     any_j = lambda m: (m * other).max(-1)
-    blocked = g * any_j(near(x, gx, w * 0.95) & near(y, gy, h * 0.95))
-    supported = g * np.maximum(gy < h, any_j(near(x, gx, w / 2) & near(y, gy - h, h / 2)))
-    pending = g * (1.0 - sat)                                          # goals not reached yet
-    wait = g * any_j(pending[:, None, :] * (near(gx, gx, w) & near(gy, gy - h, h / 2)))
-    first = g * any_j(g[:, None, :] * (near(gx, gx, w) & near(gy - h, gy, h / 2)))
-    covered = any_j(near(x, x, w) & near(y - h, y, h / 2))
-    return np.stack([blocked, supported, wait, first, covered], -1), pending * (1.0 - supported)
+    pending = g * (1.0 - at_goal)                                      # goals not reached yet
+    out = dict(
+        blocked=g * any_j(near(x, gx, w * 0.95) & near(y, gy, h * 0.95)),
+        supported=g * np.maximum(gy < h, any_j(near(x, gx, w / 2) & near(y, gy - h, h / 2))),
+        wait=g * any_j(pending[:, None, :] * (near(gx, gx, w) & near(gy, gy - h, h / 2))),
+        first=g * any_j(g[:, None, :] * (near(gx, gx, w) & near(gy - h, gy, h / 2))),
+        covered=any_j(near(x, x, w) & near(y - h, y, h / 2)))
+    out["needs_support"] = pending * (1.0 - out["supported"])
+    return out
 
 
 class SetNet:
@@ -160,9 +207,11 @@ class SetNet:
     rho = MLP([3H, H, out]).  `params` holds the MLPs' own arrays under prefixed keys.
     """
 
-    def __init__(self, n_features, hidden, out, seed=0, out_scale=1.0):
-        self.phi = MLP([n_features, hidden, hidden], seed=[*np.atleast_1d(seed), 0])
-        self.rho = MLP([3 * hidden, hidden, out], seed=[*np.atleast_1d(seed), 1], out_scale=out_scale)
+    def __init__(self, n_features, hidden, out, seed=0, out_scale=1.0, mlp_backward=mlp_backward):
+        self.phi = MLP([n_features, hidden, hidden], seed=[*np.atleast_1d(seed), 0],
+                       backward_fn=mlp_backward)
+        self.rho = MLP([3 * hidden, hidden, out], seed=[*np.atleast_1d(seed), 1],
+                       out_scale=out_scale, backward_fn=mlp_backward)
         self.params = {f"{name}.{k}": p for name in ("phi", "rho")
                        for k, p in getattr(self, name).params.items()}
 
@@ -187,7 +236,8 @@ class SetNet:
         dmax = np.zeros_like(de)                               # d max / d e_i: only the argmax
         np.put_along_axis(dmax, self.argmax[:, None], dc[:, None, H:], axis=1)
         g_phi = self.phi.backward((de + dmax).reshape(B * n, H))
-        return {**{f"phi.{k}": v for k, v in g_phi.items()}, **{f"rho.{k}": v for k, v in g_rho.items()}}
+        return {**{f"phi.{k}": v for k, v in g_phi.items()},
+                **{f"rho.{k}": v for k, v in g_rho.items()}}
 
 
 # ---- The factorised action distribution (sec 3):  pi(b, x, y) = pi(b) pi(x | b) pi(y | b) ----
@@ -281,7 +331,7 @@ def bc_loss(out, actions, n_x):
     return -dist.log_prob(actions).mean(), dist.backward(actions, -1.0 / B, 0.0)
 
 
-def ppo_loss(out, actions, logp_old, adv, n_x, clip=0.2, ent_coef=0.0):
+def ppo_loss(out, actions, logp_old, adv, n_x, clip, ent_coef):
     """Clipped surrogate with entropy bonus (Schulman et al. 2017); adv already normalised.
 
         r = exp(logp - logp_old);  L = -mean min(r A, clip(r, 1-eps, 1+eps) A) - c_ent mean H
@@ -307,7 +357,7 @@ def value_loss(out, returns):
     return 0.5 * np.mean((V - returns) ** 2), dout, V
 
 
-def gae(rewards, values, terminated, truncated, next_values, gamma=0.99, lam=0.95):
+def gae(rewards, values, terminated, truncated, next_values, gamma, lam):
     """Generalised advantage estimation; all inputs (T, N) with time on axis 0.
 
         delta_t = r_t + gamma V(s_{t+1}) (1 - term_t) - V(s_t)
@@ -330,16 +380,19 @@ def gae(rewards, values, terminated, truncated, next_values, gamma=0.99, lam=0.9
 # ---- The agent ---------------------------------------------------------------------------
 
 class Agent:
-    """Policy pi(b, x, y | s, g) and value V(s, g), two SetNets with separate Adam states."""
+    """Policy pi(b, x, y | s, g) and value V(s, g), two SetNets with separate Adam states.
 
-    def __init__(self, n_blocks=6, n_x=37, n_y=None, hidden=128, seed=0,
-                 block_size=(0.10, 0.05), table_x=(-0.5, 0.5), threshold=0.02):
+    mlp_backward(params, hs, dout) -> (grads, dx) is the backward pass of every MLP in them: the
+    library's by default, or a student's (exercise 7 trains with it).
+    """
+
+    def __init__(self, n_blocks=6, n_x=37, n_y=None, hidden=128, seed=0, mlp_backward=mlp_backward):
         self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
         self.n_y = self.n_blocks if n_y is None else int(n_y)
-        self.geometry = dict(block_size=block_size, table_x=table_x, threshold=threshold)
-        F = featurize(np.zeros((1, self.n_blocks, 6)), self.n_y, **self.geometry).shape[-1]
-        self.actor = SetNet(F, hidden, 1 + self.n_x + self.n_y, seed=[seed, 0], out_scale=0.01)
-        self.critic = SetNet(F, hidden, 1, seed=[seed, 1])
+        F = featurize(np.zeros((1, self.n_blocks, 6)), self.n_y).shape[-1]
+        self.actor = SetNet(F, hidden, 1 + self.n_x + self.n_y, seed=[seed, 0], out_scale=0.01,
+                            mlp_backward=mlp_backward)
+        self.critic = SetNet(F, hidden, 1, seed=[seed, 1], mlp_backward=mlp_backward)
         self.actor_opt, self.critic_opt = Adam(self.actor.params), Adam(self.critic.params)
         self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
 
@@ -348,7 +401,7 @@ class Agent:
         obs = np.asarray(obs, dtype=np.float64)
         if obs.ndim != 3 or obs.shape[1:] != (self.n_blocks, 6):
             raise ValueError(f"obs must have shape (B, {self.n_blocks}, 6), got {obs.shape}")
-        return featurize(obs, self.n_y, **self.geometry)
+        return featurize(obs, self.n_y)
 
     def _batched(self, obs):
         obs = np.asarray(obs, dtype=np.float64)
@@ -384,18 +437,20 @@ class Agent:
         actions = np.asarray(actions, dtype=np.int64)
         self._check_actions(actions)
         loss = lambda out, a: bc_loss(out, a, self.n_x)
-        return self._fit("BC", self.actor, self.actor_opt, loss, obs, actions, epochs, batch_size, lr,
-                         rng, max_grad_norm)
+        return self._fit("BC", self.actor, self.actor_opt, loss, obs, actions, epochs,
+                         batch_size, lr, rng, max_grad_norm)
 
     def fit_value(self, obs, returns, epochs, batch_size, lr, rng, max_grad_norm=None):
         """Regress V(s, g) on returns (e.g. of demonstrations): L = mean 0.5 (V - R)^2.
 
         obs (N, n, 6), returns (N,).  -> list of the mean minibatch loss of each epoch.
         """
-        return self._fit("value fit", self.critic, self.critic_opt, value_loss, obs,
-                         np.asarray(returns, np.float64), epochs, batch_size, lr, rng, max_grad_norm)
+        returns = np.asarray(returns, np.float64)
+        return self._fit("value fit", self.critic, self.critic_opt, value_loss, obs, returns,
+                         epochs, batch_size, lr, rng, max_grad_norm)
 
-    def _fit(self, phase, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng, max_grad_norm):
+    def _fit(self, phase, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng,
+             max_grad_norm):
         """Minibatch Adam on loss_fn(out, targets) -> (L, dL/dout, ...); features are computed
         per minibatch, as (N, n, F) float64 for N = 100k would need ~300 MB."""
         obs, opt.lr, losses = np.asarray(obs, dtype=np.float64), lr, []
@@ -404,20 +459,22 @@ class Agent:
             for i, idx in enumerate(_minibatches(len(obs), batch_size, rng)):
                 loss, dout = loss_fn(net.forward(self.features(obs[idx])), targets[idx])[:2]
                 grads, norm = clip_grad_norm(net.backward(dout), max_grad_norm)
-                check_finite(f"{phase} epoch {e + 1} minibatch {i + 1}", loss=loss, gradient_norm=norm)
+                check_finite(f"{phase} epoch {e + 1} minibatch {i + 1}", loss=loss,
+                             gradient_norm=norm)
                 opt.step(grads)
                 epoch.append(loss)
             check_finite(f"{phase} epoch {e + 1}", parameters=net.params)
             losses.append(float(np.mean(epoch)))
         return losses
 
-    def ppo_update(self, obs, actions, logp_old, adv, returns, epochs=4, minibatch=256, clip=0.2,
-                   ent_coef=0.01, vf_coef=0.5, lr=3e-4, max_grad_norm=0.5, rng=None):
+    def ppo_update(self, obs, actions, logp_old, adv, returns, *, epochs, minibatch, clip,
+                   ent_coef, vf_coef, lr, max_grad_norm, rng=None, ppo_loss=ppo_loss):
         """PPO epochs over one batch of N transitions: obs (N, n, 6), actions (N, 3), logp_old,
         raw GAE advantages adv and returns (N,).  The advantages are normalised here, once over
         the whole batch.  Actor: L = L_clip - c_ent H;  critic: c_v 0.5 (V - R)^2.  The two
         networks share nothing, so each has its own Adam and its own gradient-norm clip (with
-        Adam, vf_coef matters only through that clip).
+        Adam, vf_coef matters only through that clip).  The hyperparameters have no defaults:
+        taskexp.Config holds them.  ppo_loss: the loss function (the library's, or a student's).
 
         -> metrics, means over all minibatch updates unless noted:
            policy_loss  L_clip (without the entropy term)
@@ -447,9 +504,11 @@ class Agent:
                                           adv[idx], self.n_x, clip, ent_coef)
                 g_actor, norm_actor = clip_grad_norm(self.actor.backward(dout), max_grad_norm)
                 vl, dv, _ = value_loss(self.critic.forward(f), returns[idx])
-                g_critic, norm_critic = clip_grad_norm(self.critic.backward(vf_coef * dv), max_grad_norm)
-                check_finite(f"PPO update epoch {e + 1} minibatch {i + 1}", policy_loss=pl, value_loss=vl,
-                             actor_gradient_norm=norm_actor, critic_gradient_norm=norm_critic)
+                g_critic, norm_critic = clip_grad_norm(self.critic.backward(vf_coef * dv),
+                                                       max_grad_norm)
+                check_finite(f"PPO update epoch {e + 1} minibatch {i + 1}", policy_loss=pl,
+                             value_loss=vl, actor_gradient_norm=norm_actor,
+                             critic_gradient_norm=norm_critic)
                 self.actor_opt.step(g_actor)
                 self.critic_opt.step(g_critic)
                 r = info["ratio"]
@@ -466,13 +525,15 @@ class Agent:
             raise ValueError(f"actions must have shape (N, 3), got {actions.shape}")
         bad = ((actions < 0) | (actions >= hi)).any(1)
         if bad.any():
-            raise ValueError(f"actions must be ints below {hi.tolist()}, got {actions[bad][:5].tolist()}")
+            raise ValueError(f"actions must be ints below {hi.tolist()}, "
+                             f"got {actions[bad][:5].tolist()}")
 
     # -------------------------------------------------------------------------- persistence
 
     def state_dict(self):
         """{"actor.phi.W0": array, ...}: every parameter, no optimiser state."""
-        return {f"{net}.{k}": p for net in ("actor", "critic") for k, p in getattr(self, net).params.items()}
+        return {f"{net}.{k}": p for net in ("actor", "critic")
+                for k, p in getattr(self, net).params.items()}
 
     def training_state(self):
         """What decides future updates besides the parameters, for resuming a run exactly:
@@ -487,7 +548,8 @@ class Agent:
     def load_training_state(self, data, path):
         """Inverse of training_state, from the arrays `data` of file `path` (named in errors)."""
         for key, want in self.training_state().items():
-            if key not in data or data[key].shape != want.shape or data[key].dtype.kind != want.dtype.kind:
+            have = data.get(key)
+            if have is None or have.shape != want.shape or have.dtype.kind != want.dtype.kind:
                 raise ValueError(f"{path}: {key} missing or not like {want.dtype} {want.shape}")
         self.rng.bit_generator.state = json.loads(str(data["rng"]))
         for name in ("actor_opt", "critic_opt"):
@@ -497,37 +559,52 @@ class Agent:
                 getattr(opt, mv).update({k: data[f"{name}.{mv}.{k}"].copy() for k in opt.params})
 
     def save(self, path, extra=None):
-        """Write the parameters plus header ("format_version", "sizes" = n_blocks, n_x, n_y,
-        hidden) and any `extra` arrays as a plain .npz (see save_npz)."""
-        save_npz(path, {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
-                        "sizes": np.array([self.n_blocks, self.n_x, self.n_y, self.hidden], dtype=np.int64),
-                        **self.state_dict(), **(extra or {})})
+        """Write the parameters plus a header and any `extra` arrays as a plain .npz (save_npz).
+        The header is what load needs to rebuild the agent: "format_version", "sizes" (n_blocks,
+        n_x, n_y, hidden) and "geometry", the world's env2d.GEOMETRY that the features assume."""
+        save_npz(path, {**self.header(), **self.state_dict(), **(extra or {})})
+
+    def header(self):
+        return {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
+                "sizes": np.array([self.n_blocks, self.n_x, self.n_y, self.hidden], dtype=np.int64),
+                "geometry": np.array(list(GEOMETRY.values()), dtype=np.float64)}
 
     @classmethod
-    def load(cls, path, extra=(), **geometry):
+    def load(cls, path, extra=()):
         """Read a file written by save -> Agent (or (Agent, {key: array}) for the keys in `extra`).
-        ValueError naming the file on a corrupt or truncated file, a wrong format version, or
-        keys/shapes that do not match the sizes."""
+        ValueError naming the file on a corrupt or truncated file, a wrong format version, a world
+        of another geometry, or keys/shapes that do not match the sizes."""
         data = load_npz(path)
+        if "state_version" in data and "state_version" not in extra:
+            raise ValueError(f"{path}: a run's resume state, not an agent checkpoint; load one of "
+                             "the run's round{k}.npz files")
         if "format_version" not in data or "sizes" not in data:
-            raise ValueError(f"{path}: missing header (format_version, sizes)")
+            raise ValueError(f"{path}: not an agent checkpoint (no format_version and sizes)")
         version, sizes = data["format_version"], data["sizes"]
         if version.shape != () or version.dtype.kind not in "iu" or int(version) != FORMAT_VERSION:
             raise ValueError(f"{path}: format_version {version}, expected {FORMAT_VERSION}")
         if sizes.shape != (4,) or sizes.dtype.kind not in "iu" or (sizes < 1).any():
             raise ValueError(f"{path}: sizes {sizes}, expected 4 positive ints "
                              "(n_blocks, n_x, n_y, hidden)")
+        geometry = data.get("geometry", np.zeros(0))
+        if geometry.shape != (len(GEOMETRY),) or (geometry != list(GEOMETRY.values())).any():
+            saved = dict(zip(GEOMETRY, geometry.tolist()))
+            diff = {k: (saved.get(k), v) for k, v in GEOMETRY.items() if saved.get(k) != v}
+            raise ValueError(f"{path}: made for a world of other geometry than env2d's "
+                             f"(saved, now): {diff}")
         n_blocks, n_x, n_y, hidden = (int(k) for k in sizes)
-        agent = cls(n_blocks, n_x, n_y, hidden, **geometry)
+        agent = cls(n_blocks, n_x, n_y, hidden)
         params, extra = agent.state_dict(), set(extra)
         missing = extra - set(data)
         if missing:
             raise ValueError(f"{path}: missing {sorted(missing)}")
-        if set(params) != set(data) - {"format_version", "sizes"} - extra:
-            diff = sorted(set(params) ^ (set(data) - {"format_version", "sizes"} - extra))
-            raise ValueError(f"{path}: keys do not match sizes {sizes.tolist()}: {diff}")
+        stored = set(data) - set(agent.header()) - extra
+        if set(params) != stored:
+            raise ValueError(f"{path}: keys do not match sizes {sizes.tolist()}: "
+                             f"{sorted(set(params) ^ stored)}")
         for k, p in params.items():
-            if data[k].shape != p.shape or data[k].dtype.kind != "f" or not np.isfinite(data[k]).all():
+            have = data[k]
+            if have.shape != p.shape or have.dtype.kind != "f" or not np.isfinite(have).all():
                 raise ValueError(f"{path}: {k} is {data[k].dtype} {data[k].shape}, expected finite "
                                  f"float {p.shape} for sizes {sizes.tolist()}")
             p[...] = data[k]                      # in place: the networks and Adam share p
@@ -554,10 +631,17 @@ def save_npz(path, arrays):
 def load_npz(path):
     """Read a .npz without pickle -> {name: array}; ValueError naming the file if unreadable."""
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):       # a bare .npy array, not named arrays
+            raise ValueError("a single array")
+        with z:
             return {k: z[k] for k in z.files}
+    except FileNotFoundError:
+        raise ValueError(f"{path}: no such file") from None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile, KeyError) as e:
-        raise ValueError(f"{path}: not a readable .npz file ({type(e).__name__}: {e})") from e
+        # numpy's own message for a file that is no zip suggests allow_pickle: never do that here
+        why = "not a zip of arrays" if "pickle" in str(e) else f"{type(e).__name__}: {e}"
+        raise ValueError(f"{path}: not a readable .npz file, so not a checkpoint ({why})") from e
 
 
 def _minibatches(N, size, rng):

@@ -1,16 +1,16 @@
 """env2d.py -- the 2D side-view block world of taskexp (pymunk physics, Gymnasium API). ~420 lines.
 
-The world of "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu), sec 5,
-seen from the side: n_blocks rigid blocks (10 cm x 5 cm, 0.1 kg) on a table one metre wide, under
-gravity. One action picks a block up and puts it down somewhere else: the block is teleported to the
-centre of an x-bin (37 bins a quarter block apart) in a layer (y-bin, one block height each), with
-angle 0 and no velocity, and then physics runs until everything rests. A pose that overlaps another
-block makes the action a no-op -- the hand never pushes. A block put in mid air falls; a block put
-half over an edge may topple; a block that falls off the table lands on a catch floor half a metre
-below and stays in the state (its y is negative). A task is a set of goals {block: (x, y)}; it is
-solved when every goal block rests within THRESHOLD of its target. The state is the array
-(n_blocks, 6) of x, y, angle, vx, vy, w, and the space is rebuilt from it at every step, so a step
-depends on (state, action) alone, bit for bit: a saved state replays exactly.
+The world of "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu), sec
+5, seen from the side: n_blocks rigid blocks (10 cm x 5 cm, 0.1 kg) on a table one metre wide,
+under gravity. One action picks a block up and puts it down somewhere else: the block is teleported
+to the centre of an x-bin (37 bins a quarter block apart) in a layer (y-bin, one block height
+each), with angle 0 and no velocity, and then physics runs until everything rests. A pose that
+overlaps another block makes the action a no-op -- the hand never pushes. A block put in mid air
+falls; a block put half over an edge may topple; a block that falls off the table lands on a catch
+floor half a metre below and stays in the state (its y is negative). A task is a set of goals
+{block: (x, y)}; it is solved when every goal block rests within THRESHOLD of its target. The state
+is the array (n_blocks, 6) of x, y, angle, vx, vy, w, and the space is rebuilt from it at every
+step, so a step depends on (state, action) alone, bit for bit: a saved state replays exactly.
 """
 import math
 
@@ -23,11 +23,16 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
 
+# The world's geometry: the one place it is written. The agent's features (agent.featurize), its
+# checkpoints (Agent.save records GEOMETRY, Agent.load checks it) and the exercises read it here.
 BLOCK_W, BLOCK_H = 0.10, 0.05               # metres; width twice the height
 TABLE_X = (-0.5, 0.5)                       # ten block widths
 THRESHOLD = 0.02                            # a goal holds within 2 cm (euclidean, block centre)
 N_X = 37
-X_BINS = np.linspace(-0.45, 0.45, N_X)      # spacing BLOCK_W / 4; a block on any bin lies on the table
+# spacing BLOCK_W / 4; a block on any bin lies on the table
+X_BINS = np.linspace(-0.45, 0.45, N_X)
+GEOMETRY = {"block_w": BLOCK_W, "block_h": BLOCK_H, "table_lo": TABLE_X[0], "table_hi": TABLE_X[1],
+            "threshold": THRESHOLD, "x_lo": X_BINS[0], "x_hi": X_BINS[-1]}
 
 # Physics. Measured with pymunk 7.3.1: thin segments let blocks tunnel (hence a thick table box);
 # a 0.5 mm drop gap avoids the spin of a block born touching another; the default slop is far too
@@ -62,6 +67,38 @@ COLOURS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:
            "tab:olive"]
 
 
+def layer(y):
+    """Layer index of a height y (layer 0 rests on the table): an int, or an int array."""
+    k = np.round(np.asarray(y) / BLOCK_H - 0.5).astype(np.int64)
+    return int(k) if k.ndim == 0 else k
+
+
+def layer_y(k):
+    """Height of the centre of a block resting flat in layer k (an int or an array)."""
+    return (np.asarray(k) + 0.5) * BLOCK_H
+
+
+def max_goal_y(n_blocks):
+    """The highest a block's centre can be: all n blocks stacked on end, one on the other. A goal
+    above it can never be met."""
+    return n_blocks * BLOCK_W - BLOCK_W / 2
+
+
+# Two blocks' centres are at least BLOCK_H apart (each holds a disc of radius BLOCK_H / 2), so two
+# goals closer than this can never both hold within THRESHOLD: they name the same spot.
+SAME_SPOT = BLOCK_H - 2 * THRESHOLD
+
+
+def same_spot(goals):
+    """The first pair of blocks (a, b) whose goals {block: (x, y)} name the same spot, or None."""
+    items = list(goals.items())
+    for i, (a, (xa, ya)) in enumerate(items):
+        for b, (xb, yb) in items[i + 1:]:
+            if math.hypot(xa - xb, ya - yb) < SAME_SPOT:
+                return a, b
+    return None
+
+
 def observation(state, goals):
     """Observation (n, 6) float32 of a state (n, 6) and goals {block: (x, y)}:
     columns x, y, angle, goal_x, goal_y, has_goal (goal columns 0 for blocks without a goal)."""
@@ -74,11 +111,13 @@ def observation(state, goals):
 
 def is_success(state, goals, threshold=THRESHOLD):
     """True iff every goal block's centre is within `threshold` of its target (state (n, 6))."""
-    return all(np.hypot(state[b, 0] - x, state[b, 1] - y) < threshold for b, (x, y) in goals.items())
+    return all(np.hypot(state[b, 0] - x, state[b, 1] - y) < threshold
+               for b, (x, y) in goals.items())
 
 
 def overlap_depth(pose, others):
-    """Penetration depth (m,) of an upright block at pose (x, y) into blocks others (m, >=3): x, y, angle.
+    """Penetration depth (m,) of an upright block at pose (x, y) into blocks `others` (m, >=3):
+    x, y, angle.
 
     Separating axis test for two rectangles: along an axis n their projections overlap by
     r_A(n) + r_B(n) - |d . n| (d the offset of the centres, r(n) = W/2 |u . n| + H/2 |v . n| for a
@@ -138,7 +177,8 @@ def animate(states, goals=None, titles=None, fps=2, dpi=60, html=False):
         draw_scene(fig.add_subplot(), state, g, title=title).axis("off")
         fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.9)
         canvas.draw()
-        frames.append(Image.fromarray(np.asarray(canvas.buffer_rgba())[..., :3].copy()).quantize(64))
+        rgb = np.asarray(canvas.buffer_rgba())[..., :3].copy()
+        frames.append(Image.fromarray(rgb).quantize(64))
     buf, ms = io.BytesIO(), int(1000 / fps)
     frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], loop=0,
                    duration=[ms] * (len(frames) - 1) + [3 * ms])
@@ -157,14 +197,23 @@ class BlockWorld(gymnasium.Env):
     def __init__(self, n_blocks=6, max_steps=10, render_mode=None):
         if not (isinstance(n_blocks, (int, np.integer)) and 2 <= n_blocks <= 8):
             raise ValueError(f"n_blocks={n_blocks!r}: need an int in 2..8 to fit the table")
+        if not (isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool)
+                and max_steps >= 1):
+            raise ValueError(f"max_steps={max_steps!r}: need an int >= 1 (actions per episode)")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode={render_mode!r}: only None or 'rgb_array'")
         self.n_blocks, self.max_steps, self.render_mode = int(n_blocks), int(max_steps), render_mode
         self.block_size, self.table_x, self.threshold = (BLOCK_W, BLOCK_H), TABLE_X, THRESHOLD
         self.x_bins = X_BINS.copy()
-        self.y_bins = (np.arange(self.n_blocks) + 0.5) * BLOCK_H
+        self.y_bins = layer_y(np.arange(self.n_blocks))
         self.action_space = spaces.MultiDiscrete([self.n_blocks, N_X, self.n_blocks])
-        self.observation_space = spaces.Box(-np.inf, np.inf, (self.n_blocks, 6), np.float32)
+        # Columns x, y, angle, goal_x, goal_y, has_goal. A block that falls off the table lands on
+        # the catch floor (10 m wide); none can be higher than max_goal_y; "no goal" is all zeros.
+        top = max_goal_y(self.n_blocks)
+        low = np.array([-5.0, FLOOR_Y, -np.pi, TABLE_X[0], 0.0, 0.0], np.float32)
+        high = np.array([5.0, top, np.pi, TABLE_X[1], top, 1.0], np.float32)
+        self.observation_space = spaces.Box(np.tile(low, (self.n_blocks, 1)),
+                                            np.tile(high, (self.n_blocks, 1)), dtype=np.float32)
         # Bodies and shapes are made once and moved into a fresh Space at every step (cheaper than
         # new objects; a fresh Space has no cached contacts, so results depend on the state only).
         self._table = pymunk.Body(body_type=pymunk.Body.STATIC)
@@ -186,7 +235,7 @@ class BlockWorld(gymnasium.Env):
         self._fields = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
                         | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
         self._state, self._goals = np.zeros((self.n_blocks, 6)), {}
-        self._steps, self._stable = 0, True
+        self._steps, self._stable, self._started = 0, True, False
 
     # -- state, goals, actions ------------------------------------------------------------------
 
@@ -205,7 +254,8 @@ class BlockWorld(gymnasium.Env):
             raise ValueError(f"block {block!r} not in 0..{self.n_blocks - 1}")
         if not (np.isfinite(x) and np.isfinite(y)):
             raise ValueError(f"position ({x!r}, {y!r}) not finite")
-        return np.array([block, np.abs(self.x_bins - x).argmin(), np.abs(self.y_bins - y).argmin()], np.int64)
+        ix, iy = np.abs(self.x_bins - x).argmin(), np.abs(self.y_bins - y).argmin()
+        return np.array([block, ix, iy], np.int64)
 
     def decode_action(self, action):
         """(block, x, y) of an action (3,): the block id and the centre it is teleported to."""
@@ -214,13 +264,15 @@ class BlockWorld(gymnasium.Env):
 
     def _check_action(self, action):
         a = np.asarray(action)
-        if a.shape != (3,) or a.dtype.kind not in "iu" or not ((a >= 0) & (a < self.action_space.nvec)).all():
-            raise ValueError(f"action {action!r} not 3 ints in MultiDiscrete({self.action_space.nvec.tolist()})")
+        nvec = self.action_space.nvec
+        if a.shape != (3,) or a.dtype.kind not in "iu" or not ((a >= 0) & (a < nvec)).all():
+            raise ValueError(f"action {action!r} not 3 ints in MultiDiscrete({nvec.tolist()})")
         return int(a[0]), int(a[1]), int(a[2])
 
     def _check_goals(self, goals):
         if not isinstance(goals, dict) or not 1 <= len(goals) <= self.n_blocks:
-            raise ValueError(f"goals {goals!r}: need a dict {{block: (x, y)}} of 1..{self.n_blocks} goals")
+            raise ValueError(f"goals {goals!r}: need a dict {{block: (x, y)}} "
+                             f"of 1..{self.n_blocks} goals")
         checked = {}
         for b, xy in goals.items():
             if not isinstance(b, (int, np.integer)) or not 0 <= b < self.n_blocks:
@@ -233,6 +285,10 @@ class BlockWorld(gymnasium.Env):
                 raise ValueError(f"goal {xy!r} of block {b}: x off the table {TABLE_X}")
             if not (np.isfinite(y) and y >= BLOCK_H / 2 - THRESHOLD):
                 raise ValueError(f"goal {xy!r} of block {b}: y below the table top")
+            top = max_goal_y(self.n_blocks)
+            if y > top:
+                raise ValueError(f"goal {xy!r} of block {b}: y above {top:.3f} m, higher than "
+                                 f"{self.n_blocks} blocks stacked on end can reach")
             checked[int(b)] = (float(x), float(y))
         return checked
 
@@ -253,8 +309,13 @@ class BlockWorld(gymnasium.Env):
         if "state" in options:
             state = np.array(options["state"], dtype=np.float64)
             if state.shape != (self.n_blocks, 6) or not np.isfinite(state).all():
-                raise ValueError(f"state of shape {state.shape} (need ({self.n_blocks}, 6), finite): "
-                                 f"{options['state']!r}")
+                raise ValueError(f"state of shape {state.shape} (need ({self.n_blocks}, 6), "
+                                 f"finite): {options['state']!r}")
+            low, high = self.observation_space.low[0, :3], self.observation_space.high[0, :3]
+            outside = ~((state[:, :3] >= low) & (state[:, :3] <= high)).all(1)
+            if outside.any():
+                raise ValueError(f"state: block {np.flatnonzero(outside)[0]} lies outside the "
+                                 f"world (x, y, angle within {low.tolist()} and {high.tolist()})")
             if goals is None:
                 goals = self._random_goal(state)
         else:
@@ -263,7 +324,7 @@ class BlockWorld(gymnasium.Env):
                          (float(self.np_random.choice(self.x_bins)), float(self.y_bins[0]))}
             state = np.zeros((self.n_blocks, 6))
             state[:, 0], state[:, 1] = self._scatter(goals), BLOCK_H / 2
-        self._state, self._goals, self._steps = state, goals, 0
+        self._state, self._goals, self._steps, self._started = state, goals, 0, True
         speeds = np.abs(state[:, 3:]) @ REST_CRITERIA[3:, 1:]           # (|vx| + |vy|) / REST_V, |w| / REST_W
         self._stable = bool(speeds.max() < 1.0)
         return observation(self._state, self._goals), {"success": is_success(state, goals)}
@@ -272,8 +333,11 @@ class BlockWorld(gymnasium.Env):
         """Teleport, then settle. Returns (obs (n, 6), reward, terminated, truncated, info).
 
         info: "noop" (the pose overlapped a block: nothing moved), "stable" (came to rest; after a
-        no-op, as before), "success" (= terminated), "settle_steps" (substeps simulated, 0 for a no-op).
+        no-op, as before), "success" (= terminated), "settle_steps" (substeps simulated, 0 for a
+        no-op).
         """
+        if not self._started:
+            raise gymnasium.error.ResetNeeded("call reset() before step(): there is no scene yet")
         b, ix, iy = self._check_action(action)
         pose = (self.x_bins[ix], self.y_bins[iy] + DROP_GAP)
         others = self._state[np.arange(self.n_blocks) != b, :3]
@@ -324,12 +388,15 @@ class BlockWorld(gymnasium.Env):
         xs = []
         for (lo, hi), k in zip(segments, counts):
             slack = max(hi - lo - k * BLOCK_W, 0.0)
-            xs.extend(lo + np.sort(self.np_random.uniform(0, slack, k)) + BLOCK_W * (np.arange(k) + 0.5))
+            gaps = np.sort(self.np_random.uniform(0, slack, k))
+            xs.extend(lo + gaps + BLOCK_W * (np.arange(k) + 0.5))
         return self.np_random.permutation(np.array(xs))
 
     def _random_goal(self, state):
-        """One goal {block: (x, y_0)} on a table spot no block overlaps (any spot if none is free)."""
-        free = [x for x in self.x_bins if not (overlap_depth((x, self.y_bins[0]), state) > OVERLAP_TOL).any()]
+        """One goal {block: (x, y_0)} on a table spot no block overlaps (any spot if none is
+        free)."""
+        free = [x for x in self.x_bins
+                if not (overlap_depth((x, self.y_bins[0]), state) > OVERLAP_TOL).any()]
         b = int(self.np_random.integers(self.n_blocks))
         return {b: (float(self.np_random.choice(free or self.x_bins)), float(self.y_bins[0]))}
 
@@ -384,7 +451,7 @@ class BlockWorld(gymnasium.Env):
 
 
 def _free_segments(goal_xs):
-    """Free stretches [(lo, hi), ...] of the table once the footprints of goals at goal_xs are removed."""
+    """Free stretches [(lo, hi), ...] of the table without the footprints of goals at goal_xs."""
     segments, lo = [], TABLE_X[0]
     for x in sorted(goal_xs):
         if x - BLOCK_W / 2 > lo:
@@ -407,8 +474,8 @@ def stack_tower(env):
 
 
 def adversarial_action(state, integers, choice):
-    """An action (block, x-bin, layer) aimed where physics is most likely to break, given the current
-    state (n, 6). integers(lo, hi) draws an int in [lo, hi]; choice(seq) draws an element of seq."""
+    """An action (block, x-bin, layer) aimed where physics is most likely to break, given the
+    current state (n, 6). integers(lo, hi) draws an int in [lo, hi]; choice(seq) draws an element of seq."""
     n = len(state)
     b = integers(0, n - 1)
     kind = choice(["uniform", "into", "onto", "air", "edge"])
@@ -420,5 +487,9 @@ def adversarial_action(state, integers, choice):
         return b, integers(0, N_X - 1), n - 1
     j = integers(0, n - 1)                                 # another block, maybe on a tall stack
     ix = int(np.abs(X_BINS - state[j, 0]).argmin()) + integers(-3, 3)
-    layer = int(np.clip(np.floor(state[j, 1] / BLOCK_H), 0, n - 1)) + (kind == "onto")
-    return b, int(np.clip(ix, 0, N_X - 1)), int(np.clip(layer, 0, n - 1))
+    k = int(np.clip(np.floor(state[j, 1] / BLOCK_H), 0, n - 1)) + (kind == "onto")
+    return b, int(np.clip(ix, 0, N_X - 1)), int(np.clip(k, 0, n - 1))
+
+
+# `gymnasium.make("taskexp/BlockWorld-v0", n_blocks=7)` builds a BlockWorld (keywords pass through).
+gymnasium.register(id="taskexp/BlockWorld-v0", entry_point=BlockWorld)

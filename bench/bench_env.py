@@ -8,19 +8,14 @@ steps. Each action costs a teleport test, a space rebuilt from the state (exactn
 until rest and the rest checks; the floor is pymunk's cpSpaceStep alone, timed on the same scenes
 for the same number of substeps. Best of --repeats runs.
 """
-import os
 
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
 
 import argparse
-import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-from env2d import DROP_GAP, DT, BlockWorld, _space_step  # noqa: E402
+from env2d import DROP_GAP, DT, BlockWorld, _space_step
 
 
 def run(env, actions, seed):
@@ -44,8 +39,8 @@ def physics_only(env, starts, substeps, raw):
     or (raw) chipmunk's cpSpaceStep as env2d calls it."""
     total = 0.0
     for start, k in zip(starts, substeps):
-        env._load(start)                       # private: the same space the env would simulate
-        env._space.step(0.0)                   # pymunk's one-off checks of new bodies (0 does nothing)
+        env._load(start)       # private: the same space the env would simulate
+        env._space.step(0.0)   # pymunk's one-off checks of new bodies (0 does nothing)
         step, args = (_space_step, (env._space._space, DT)) if raw else (env._space.step, (DT,))
         t0 = time.perf_counter()
         for _ in range(k):
@@ -63,19 +58,25 @@ def main(argv=None):
     env = BlockWorld(args.n_blocks, max_steps=10)
     rng = np.random.default_rng(0)
     actions = np.stack([rng.integers(env.action_space.nvec) for _ in range(args.actions)])
-    seconds, starts, substeps = min((run(env, actions, seed=1) for _ in range(args.repeats)), key=lambda r: r[0])
-    step_s = min(physics_only(env, starts, substeps, False) for _ in range(args.repeats)) / sum(substeps)
-    raw_s = min(physics_only(env, starts, substeps, True) for _ in range(args.repeats)) / sum(substeps)
+    seconds, starts, substeps = min((run(env, actions, seed=1) for _ in range(args.repeats)),
+                                    key=lambda r: r[0])
+    step_s = min(physics_only(env, starts, substeps, False)
+                 for _ in range(args.repeats)) / sum(substeps)
+    raw_s = min(physics_only(env, starts, substeps, True)
+                for _ in range(args.repeats)) / sum(substeps)
     per_action = seconds / len(actions)
     mean_sub = sum(substeps) / len(actions)              # no-ops count with 0 substeps
     print(f"n_blocks={args.n_blocks}  actions={len(actions)}  no-ops={len(actions) - len(starts)}")
     print(f"actions/s                        {1 / per_action:8.0f}")
     print(f"time per action                  {per_action * 1e6:8.1f} us")
-    print(f"mean settle substeps per action  {mean_sub:8.2f}   (per simulated action {np.mean(substeps):.2f})")
+    print(f"mean settle substeps per action  {mean_sub:8.2f}   "
+          f"(per simulated action {np.mean(substeps):.2f})")
     print(f"pymunk Space.step per substep    {step_s * 1e6:8.2f} us")
     print(f"chipmunk cpSpaceStep per substep {raw_s * 1e6:8.2f} us   (what env2d calls)")
-    print(f"ratio time/action / (Space.step * mean substeps)    {per_action / (step_s * mean_sub):.2f}")
-    print(f"ratio time/action / (cpSpaceStep * mean substeps)   {per_action / (raw_s * mean_sub):.2f}")
+    print("ratio time/action / (Space.step * mean substeps)    "
+          f"{per_action / (step_s * mean_sub):.2f}")
+    print("ratio time/action / (cpSpaceStep * mean substeps)   "
+          f"{per_action / (raw_s * mean_sub):.2f}")
 
 
 if __name__ == "__main__":

@@ -6,20 +6,15 @@ Top row: a random start scene for each shape, made as the evaluation makes them.
 where the greedy policy of the checkpoint left the blocks (title: success or not). Without --agent
 the bottom row is the shape built by hand, bottom-up.
 """
-import os
-
-for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
 import argparse
-import sys
+import os
 
 import numpy as np
 from matplotlib.figure import Figure
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-import taskexp  # noqa: E402
-from agent import Agent  # noqa: E402
-from env2d import BlockWorld, draw_scene, is_success  # noqa: E402
+import taskexp
+from agent import Agent
+from env2d import BlockWorld, draw_scene, is_success
 
 
 def main():
@@ -35,10 +30,12 @@ def main():
     for col, name in enumerate(names):
         goals = taskexp.shape_goals(name, env, rng)
         s0 = taskexp.start_state(env, goals, rng)
-        draw_scene(fig.add_subplot(2, len(names), col + 1), s0, goals, title=f'"{name}": start and goals')
+        draw_scene(fig.add_subplot(2, len(names), col + 1), s0, goals,
+                   title=f'"{name}": start and goals')
         if agent:
             t = taskexp.run_episodes(agent, [(s0, goals)], [env], rng, deterministic=True)[0]
-            end, title = t.states[-1], f"agent: {'success' if t.success else 'failure'} in {len(t.actions)} steps"
+            end, title = t.states[-1], (f"agent: {'success' if t.success else 'failure'} "
+                                        f"in {len(t.actions)} steps")
         else:
             env.reset(options={"state": s0, "goals": goals})
             for b, (x, y) in sorted(goals.items(), key=lambda kv: kv[1][1]):

@@ -15,9 +15,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, ".."))
-import taskexp  # noqa: E402
+import cli
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"]}
@@ -26,9 +24,9 @@ FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--
 def run_one(variant, seed, rounds, root, extra_args):
     """Finished runs are reused, stopped ones resumed (same results as if never stopped)."""
     out = os.path.join(root, f"{variant}-seed{seed}")
-    done = taskexp.saved_round(out)
+    done = cli.saved_round(out)
     if done < rounds:
-        cmd = [sys.executable, taskexp.__file__, "--rounds", str(rounds), "--out", out]
+        cmd = [sys.executable, "-m", "cli", "--rounds", str(rounds), "--out", out]
         cmd += ["--resume"] if done >= 0 else ["--seed", str(seed), *FLAGS[variant], *extra_args]
         with open(out + ".log", "a" if done >= 0 else "w") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
@@ -62,7 +60,8 @@ def main():
                 v = 100 * np.array([r["rounds"][k]["eval"][s] for r in res])
                 cells.append(f"{v.mean():.0f} +- {v.std():.0f}%")
             t = np.array([r["wallclock"]["total_s"] for r in res]) if k == a.rounds else None
-            print(f"| {k} | " + " | ".join(cells) + f" | {'' if t is None else f'{t.mean():.0f} +- {t.std():.0f}'} |")
+            print(f"| {k} | " + " | ".join(cells)
+                  + f" | {'' if t is None else f'{t.mean():.0f} +- {t.std():.0f}'} |")
 
 
 if __name__ == "__main__":

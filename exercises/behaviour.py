@@ -1,90 +1,92 @@
-"""exercises/behaviour.py -- exercise 7: the student's mlp_backward, gae and ppo_loss, swapped into
-the library, must train the base policy (sec 4.1) past a measured bar within a fixed budget.  ~90 lines.
+"""exercises/behaviour.py -- exercise 7: the student's mlp_backward, gae and ppo_loss, passed to the
+library's training code, must train the base policy (sec 4.1) past a measured bar within a fixed
+budget.  ~100 lines.
 
 BC alone would already solve many base tasks, and then a broken PPO could pass.  So BC is kept weak
 on purpose (3000 demos, 8 epochs: 14-25% greedy success on 200 held-out base tasks), and the check
 asks for success after PPO >= threshold AND >= BC alone + min_gain: PPO's own contribution.
 Measured (notebooks/exercises/measure_ex7.py, one core, 30-55 s a run): the library's pieces reach
-59-79% over seeds 0-4 (+43 to +59.5 points); on seed 0 a sign-flipped ppo_loss, an inverted clip mask,
-a surrogate without gradient, a sign-flipped GAE delta and an MLP backward without tanh' all end at
-1-9%, below their BC start.  The full table is in notebooks/exercises/ex7_base_policy.ipynb.
+59-79% over seeds 0-4 (+43 to +59.5 points); on seed 0 a sign-flipped ppo_loss, an inverted clip
+mask, a surrogate without gradient, a sign-flipped GAE delta and an MLP backward without tanh' all
+end at 1-9%, below their BC start.  The full table is in notebooks/exercises/ex7_base_policy.ipynb.
 """
-import contextlib
 import time
 
 import numpy as np
 
 import agent
 import taskexp
-from env2d import BlockWorld
+from env2d import N_X, BlockWorld
 
 from .checks import Report
 
+# measured: see notebooks/exercises/ex7_base_policy.ipynb
 EX7 = dict(seed=0, n_blocks=4, hidden=64, demos=3000, bc_epochs=8, ppo_steps=30000, eval_tasks=200,
-           threshold=0.40, min_gain=0.20)   # measured: see notebooks/exercises/ex7_base_policy.ipynb
+           threshold=0.40, min_gain=0.20)
 
 
-@contextlib.contextmanager
-def plugged(gae=None, ppo_loss=None, mlp_backward=None):
-    """Swap the student's functions into the library for the duration; always restores them.
-    taskexp.ppo_batch calls taskexp.gae; Agent.ppo_update calls agent.ppo_loss; every network
-    calls agent.MLP.backward."""
-    saved = taskexp.gae, agent.ppo_loss, agent.MLP.backward
-    try:
-        if gae is not None:
-            taskexp.gae = gae
-        if ppo_loss is not None:
-            def wrapped(out, actions, logp_old, adv, n_x, clip=0.2, ent_coef=0.0):
-                L, dout = ppo_loss(out, actions, logp_old, adv, n_x, clip, ent_coef)[:2]
-                d = agent.ActionDist(out, n_x)       # the metrics only (ppo_update logs them)
-                return L, dout, dict(policy_loss=L, entropy=d.entropy().mean(),
-                                     ratio=np.exp(d.log_prob(actions) - logp_old))
-            agent.ppo_loss = wrapped
-        if mlp_backward is not None:
-            def backward(net, dout):
-                grads, net.dx = mlp_backward(net.params, net.hs, dout)
-                return grads
-            agent.MLP.backward = backward
-        yield
-    finally:
-        taskexp.gae, agent.ppo_loss, agent.MLP.backward = saved
+def student_pieces(gae=None, ppo_loss=None, mlp_backward=None):
+    """taskexp.Pieces with the student's functions where given (the library's elsewhere), for
+    the training code to call. The student's ppo_loss returns (L, dL/dout); the library's also
+    returns the metrics that Agent.ppo_update logs, so they are computed here around it."""
+    pieces = taskexp.Pieces()
+    if gae is not None:
+        pieces.gae = gae
+    if mlp_backward is not None:
+        pieces.mlp_backward = mlp_backward
+    if ppo_loss is not None:
+        def with_metrics(out, actions, logp_old, adv, n_x, clip, ent_coef):
+            L, dout = ppo_loss(out, actions, logp_old, adv, n_x, clip, ent_coef)[:2]
+            d = agent.ActionDist(out, n_x)
+            return L, dout, dict(policy_loss=L, entropy=d.entropy().mean(),
+                                 ratio=np.exp(d.log_prob(actions) - logp_old))
+        pieces.ppo_loss = with_metrics
+    return pieces
 
 
 def base_policy_success(gae=None, ppo_loss=None, mlp_backward=None, seed=EX7["seed"]):
-    """BC on a few single-block demos (a weak start on purpose), then PPO on the base tasks, with the
-    given pieces plugged in.  -> (greedy success after BC, after PPO, seconds) on held-out base tasks."""
+    """BC on a few single-block demos (a weak start on purpose), then PPO on the base tasks, with
+    the given pieces passed to the training code.  -> (greedy success after BC, after PPO,
+    seconds) on held-out base tasks."""
     c, t0 = EX7, time.time()
     cfg = taskexp.Config(seed=seed, n_blocks=c["n_blocks"], hidden=c["hidden"], max_steps=3,
-                         ppo_steps=c["ppo_steps"], ppo_episodes=128, ppo_lr=3e-3, stretch=0.0, n_envs=16)
+                         ppo_steps=c["ppo_steps"], ppo_episodes=128, ppo_lr=3e-3, stretch=0.0,
+                         n_envs=16)
     envs = [BlockWorld(cfg.n_blocks, max_steps=cfg.max_steps) for _ in range(cfg.n_envs)]
     rng = np.random.default_rng(seed)
     tasks, obs, actions = taskexp.base_demos(cfg, envs[0], rng, c["demos"])
-    held_out = taskexp.base_demos(cfg, envs[0], np.random.default_rng([seed, 1]), c["eval_tasks"])[0]
-    greedy = lambda ag: taskexp.success_rate(taskexp.run_episodes(ag, held_out, envs, rng, deterministic=True))
-    with plugged(gae, ppo_loss, mlp_backward):
-        ag = agent.Agent(cfg.n_blocks, n_x=len(envs[0].x_bins), hidden=cfg.hidden, seed=seed)
-        ag.bc(obs, actions, c["bc_epochs"], cfg.bc_batch, cfg.bc_lr, rng)
-        before = greedy(ag)
-        taskexp.ppo_phase(ag, tasks, cfg, envs, envs, rng, "  PPO with your gae and ppo_loss")
-        return before, greedy(ag), time.time() - t0
+    held_out = taskexp.base_demos(cfg, envs[0], np.random.default_rng([seed, 1]),
+                                  c["eval_tasks"])[0]
+    greedy = lambda ag: taskexp.success_rate(taskexp.run_episodes(ag, held_out, envs,
+                                                                  deterministic=True))
+    pieces = student_pieces(gae, ppo_loss, mlp_backward)
+    ag = agent.Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, seed=seed,
+                     mlp_backward=pieces.mlp_backward)
+    ag.bc(obs, actions, c["bc_epochs"], cfg.bc_batch, cfg.bc_lr, rng)
+    before = greedy(ag)
+    taskexp.ppo_phase(ag, tasks, cfg, envs, envs, rng, "PPO with your gae and ppo_loss",
+                      pieces=pieces)
+    return before, greedy(ag), time.time() - t0
 
 
 def check_ex7(mlp_backward, gae, ppo_loss):
     """Behavioural: with the student's pieces, PPO lifts the base policy's greedy success on 200
-    held-out base tasks to >= threshold, and by >= min_gain over BC alone, within ppo_steps steps."""
+    held-out base tasks to >= threshold, and by >= min_gain over BC alone, within ppo_steps
+    steps."""
     rep, c = Report("ex7"), EX7
-    print(f"ex7: BC on {c['demos']} demos, then PPO for {c['ppo_steps']} steps (about a minute) ...", flush=True)
+    print(f"ex7: BC on {c['demos']} demos, then PPO for {c['ppo_steps']} steps "
+          "(about a minute) ...", flush=True)
     before, after, secs = 0.0, 0.0, 0.0
     try:
         before, after, secs = base_policy_success(gae, ppo_loss, mlp_backward)
         problem = None if after >= c["threshold"] and after - before >= c["min_gain"] else (
-            f"greedy success: BC alone {before:.0%}, after PPO {after:.0%}; required >= {c['threshold']:.0%} "
-            f"and >= BC alone + {100 * c['min_gain']:.0f} points")
+            f"greedy success: BC alone {before:.0%}, after PPO {after:.0%}; "
+            f"required >= {c['threshold']:.0%} and >= BC alone + {100 * c['min_gain']:.0f} points")
     except NotImplementedError:
         problem = "raised NotImplementedError: do ex1, ex3 and ex4 first"
     except Exception as e:
         problem = f"training raised {type(e).__name__}: {e}"
     rep.case("base policy", f"seed {c['seed']}, {c['n_blocks']} blocks", problem,
-             "pass check_ex1, check_ex3 and check_ex4 first; if they pass and success falls, look for a sign: "
-             "PPO minimises L = -mean min(rA, clip(r) A)")
+             "pass check_ex1, check_ex3 and check_ex4 first; if they pass and success falls, "
+             "look for a sign: PPO minimises L = -mean min(rA, clip(r) A)")
     return rep.done(f" (success {before:.0%} after BC -> {after:.0%} after PPO, {secs:.0f} s)")

@@ -3,9 +3,26 @@ plain reference, numerical stability, sampling, the Agent API, persistence, and 
 import numpy as np
 import pytest
 
-from agent import (MLP, ActionDist, Adam, Agent, SetNet, bc_loss, clip_grad_norm, entropy_of,
-                   featurize, gae, log_softmax, ppo_loss, relations, value_loss)
-from exercises.checks import numerical_grad        # central differences, step 1e-6
+from agent import (
+    MLP,
+    RELATIONS,
+    ActionDist,
+    Adam,
+    Agent,
+    SetNet,
+    bc_loss,
+    clip_grad_norm,
+    entropy_of,
+    feature_columns,
+    featurize,
+    gae,
+    log_softmax,
+    ppo_loss,
+    relations,
+    value_loss,
+)
+from env2d import GEOMETRY
+from exercises.checks import numerical_grad  # central differences, step 1e-6
 
 TOL = 1e-5
 
@@ -62,14 +79,16 @@ def test_setnet_backward_matches_finite_differences_including_max_pool():
 def action_setup(seed=3, B=6, n=4, n_x=7, n_y=3, scale=2.0):
     rng = np.random.default_rng(seed)
     out = scale * rng.standard_normal((B, n, 1 + n_x + n_y))
-    actions = np.stack([rng.integers(n, size=B), rng.integers(n_x, size=B), rng.integers(n_y, size=B)], 1)
+    actions = np.stack([rng.integers(n, size=B), rng.integers(n_x, size=B),
+                        rng.integers(n_y, size=B)], 1)
     return rng, out, actions, n_x
 
 
 def test_logprob_entropy_backward_matches_finite_differences():
     rng, out, actions, n_x = action_setup()
     a, c = rng.standard_normal(len(out)), rng.standard_normal(len(out))
-    f = lambda: np.sum(a * ActionDist(out, n_x).log_prob(actions) + c * ActionDist(out, n_x).entropy())
+    f = lambda: np.sum(a * ActionDist(out, n_x).log_prob(actions)
+                       + c * ActionDist(out, n_x).entropy())
     dout = ActionDist(out, n_x).backward(actions, a, c)
     assert rel_err(dout, numerical_grad(f, out)) < TOL
 
@@ -168,10 +187,12 @@ def test_log_softmax_and_entropy_stable_for_extreme_logits():
     assert np.isfinite(lp).all() and np.isfinite(H).all() and (H >= 0).all() and (lp <= 0).all()
     assert np.allclose(H, [0.0, np.log(4), np.log(2)])
     dist = ActionDist(np.array([[[1e4, -1e4, 1e4, 0], [-1e4, 1e4, -1e4, 1e4]]]), 2)
-    assert np.isfinite(dist.entropy()).all() and np.isfinite(dist.backward([[0, 1, 0]], 1.0, 1.0)).all()
-    m = np.random.default_rng(9).standard_normal((5, 8)) * 3           # moderate: naive formula is fine
+    assert (np.isfinite(dist.entropy()).all()
+            and np.isfinite(dist.backward([[0, 1, 0]], 1.0, 1.0)).all())
+    m = np.random.default_rng(9).standard_normal((5, 8)) * 3   # moderate: naive formula is fine
     p = np.exp(m) / np.exp(m).sum(-1, keepdims=True)
-    assert np.allclose(log_softmax(m), np.log(p)) and np.allclose(entropy_of(log_softmax(m)), -(p * np.log(p)).sum(-1))
+    assert (np.allclose(log_softmax(m), np.log(p))
+            and np.allclose(entropy_of(log_softmax(m)), -(p * np.log(p)).sum(-1)))
 
 
 def test_sampling_frequencies_match_probabilities_and_mode_is_joint_argmax():
@@ -194,32 +215,42 @@ def test_featurize_codes():
     obs[0, :, :2] = [[0.0, 0.025], [0.2, 0.075], [-0.3, 0.025]]
     obs[0, 0, 3:] = [0.005, 0.025, 1.0]                         # satisfied (0.5 cm away)
     obs[0, 1, 3:] = [-0.2, 0.125, 1.0]                          # not satisfied
-    f = featurize(obs, n_y=3)
-    assert f.shape == (1, 3, 15 + 2 * 3 + 3 * 21)
-    assert list(f[0, :, 9]) == [1, 0, 0]                        # satisfied flag
-    assert np.array_equal(f[0, :, 10:13], np.eye(3)[[0, 1, 0]])  # current layer one-hot
-    assert np.array_equal(f[0, :, 13:16], [[1, 0, 0], [0, 0, 1], [0, 0, 0]])  # goal layer, no goal -> 0
-    assert not f[0, 2, 4:10].any() and not f[0, 2, 16 + 21:].any()
-    assert f[0, 1, 16:37].argmax() == 14 and f[0, 1, 37:58].argmax() == 6  # RBF centres every 5 cm
+    f, col = featurize(obs, n_y=3)[0], feature_columns(3)
+    assert f.shape == (3, 15 + 2 * 3 + 3 * 21) and max(c.stop for c in col.values()) == f.shape[-1]
+    assert list(f[:, col["at_goal"]][:, 0]) == [1, 0, 0]
+    assert np.array_equal(f[:, col["layer"]], np.eye(3)[[0, 1, 0]])
+    assert np.array_equal(f[:, col["goal_layer"]], [[1, 0, 0], [0, 0, 1], [0, 0, 0]])   # no goal: 0
+    goal_part = [name for name in col
+                 if name.startswith("goal") or name in ("to_goal_x", "to_goal_y")]
+    assert not any(f[2, col[name]].any() for name in goal_part + ["has_goal", "at_goal"])
+    # every 5 cm
+    assert f[1, col["x_rbf"]].argmax() == 14 and f[1, col["goal_x_rbf"]].argmax() == 6
+
+
+def relation_table(x, y, gx, gy, g):
+    """relations() for one scene of 3 blocks, as {name: list of 3 floats}."""
+    rel = relations(*(np.array([v], float) for v in (x, y, gx, gy, g)), np.zeros((1, 3)))
+    return {name: list(v[0]) for name, v in rel.items()}
 
 
 def test_relations():
     """Block 1's goal sits on block 0's goal; block 2 is in the way of block 0's goal."""
-    x, y = np.array([[-0.3, 0.3, 0.01]]), np.array([[0.025, 0.025, 0.025]])
-    gx, gy, g = np.array([[0.0, 0.0, 0.0]]), np.array([[0.025, 0.075, 0.0]]), np.array([[1.0, 1.0, 0.0]])
-    rel, needs = relations(x, y, gx, gy, g, np.zeros((1, 3)), 0.1, 0.05)
-    blocked, supported, wait, first, covered = rel[0].T
-    assert list(blocked) == [1, 0, 0] and list(supported) == [1, 1, 0]   # 2 is under 1's goal spot
-    assert list(wait) == [0, 1, 0] and list(first) == [1, 0, 0] and not covered.any()
-    assert not needs.any()
-    x[0, 2] = 0.4                                   # block 2 moves away: 1's goal hangs in the air
-    rel, needs = relations(x, y, gx, gy, g, np.zeros((1, 3)), 0.1, 0.05)
-    assert list(rel[0, :, 0]) == [0, 0, 0] and list(rel[0, :, 1]) == [1, 0, 0]
-    assert list(needs[0]) == [0, 1, 0]
-    x[0, 2] = 0.01
-    y[0, 1], x[0, 1] = 0.075, 0.02                  # block 1 now rests on block 2
-    rel, _ = relations(x, y, gx, gy, g, np.zeros((1, 3)), 0.1, 0.05)
-    assert list(rel[0, :, 4]) == [0, 0, 1] and rel[0, 1, 1] == 1    # 2 covered; 1's goal supported by 2
+    x, y = [-0.3, 0.3, 0.01], [0.025, 0.025, 0.025]
+    gx, gy, g = [0.0, 0.0, 0.0], [0.025, 0.075, 0.0], [1.0, 1.0, 0.0]
+    r = relation_table(x, y, gx, gy, g)
+    assert r["blocked"] == [1, 0, 0] and r["supported"] == [1, 1, 0]   # 2 is under 1's goal spot
+    assert r["wait"] == [0, 1, 0] and r["first"] == [1, 0, 0] and not any(r["covered"])
+    assert not any(r["needs_support"])
+    x[2] = 0.4                                      # block 2 moves away: 1's goal hangs in the air
+    r = relation_table(x, y, gx, gy, g)
+    assert r["blocked"] == [0, 0, 0] and r["supported"] == [1, 0, 0]
+    assert r["needs_support"] == [0, 1, 0]
+    x[2] = 0.01
+    y[1], x[1] = 0.075, 0.02                        # block 1 now rests on block 2
+    r = relation_table(x, y, gx, gy, g)
+    # 2 covered; 1's goal supported by 2
+    assert r["covered"] == [0, 0, 1] and r["supported"][1] == 1
+    assert set(r) == set(RELATIONS) | {"needs_support"}
 
 
 def test_act_value_sample_shapes_and_errors():
@@ -247,7 +278,7 @@ def test_adam_and_clip_grad_norm():
     p = {"w": np.ones(3)}
     opt = Adam(p, lr=0.1)
     opt.step({"w": np.array([5.0, -0.01, 1e3])})
-    assert np.allclose(p["w"], [0.9, 1.1, 0.9])                # bias-corrected first step = lr sign(g)
+    assert np.allclose(p["w"], [0.9, 1.1, 0.9])   # bias-corrected first step = lr sign(g)
     g, norm = clip_grad_norm({"a": np.array([3.0]), "b": np.array([4.0])}, 1.0)
     assert norm == 5.0 and np.isclose(np.sqrt(g["a"] ** 2 + g["b"] ** 2), 1.0)
     g2, _ = clip_grad_norm({"a": np.array([0.3])}, 1.0)
@@ -279,18 +310,31 @@ def test_load_rejects_bad_files(tmp_path):
     good = tmp_path / "good.npz"
     Agent(hidden=8).save(good)
     data = dict(np.load(good))
-    cases = {"truncated.npz": good.read_bytes()[: len(good.read_bytes()) // 2], "garbage.npz": b"not a zip"}
+    cases = {"truncated.npz": good.read_bytes()[: len(good.read_bytes()) // 2],
+             "garbage.npz": b"not a zip", "notes.txt": b"a text file\n"}
     for name, content in cases.items():
         (tmp_path / name).write_bytes(content)
     np.savez(tmp_path / "version.npz", **{**data, "format_version": np.array(99)})
     np.savez(tmp_path / "sizes.npz", **{**data, "sizes": np.array([6, 37, 6, 16])})
     np.savez(tmp_path / "shape.npz", **{**data, "actor.rho.W1": np.zeros((8, 5))})
     np.savez(tmp_path / "missing.npz", **{k: v for k, v in data.items() if k != "critic.phi.b0"})
-    for name, msg in [("truncated.npz", "readable"), ("garbage.npz", "readable"), ("version.npz", "99"),
-                      ("sizes.npz", "sizes"), ("shape.npz", "actor.rho.W1"), ("missing.npz", "critic.phi.b0")]:
+    np.savez(tmp_path / "world.npz",
+             **{**data, "geometry": data["geometry"] * [1, 2, 1, 1, 1, 1, 1]})
+    np.savez(tmp_path / "state.npz", **{**data, "state_version": np.array(1)})
+    for name, msg in [("truncated.npz", "readable"), ("garbage.npz", "readable"),
+                      ("notes.txt", "not a checkpoint"), ("version.npz", "99"),
+                      ("sizes.npz", "sizes"), ("shape.npz", "actor.rho.W1"),
+                      ("missing.npz", "critic.phi.b0"), ("world.npz", r"'block_h': \(0.1, 0.05\)"),
+                      ("state.npz", r"round\{k\}.npz")]:
         with pytest.raises(ValueError, match=msg) as e:
             Agent.load(tmp_path / name)
-        assert name in str(e.value)
+        assert name in str(e.value) and "allow_pickle" not in str(e.value)
+
+
+def test_checkpoint_records_the_world_geometry(tmp_path):
+    Agent(hidden=8).save(tmp_path / "a.npz")
+    saved = np.load(tmp_path / "a.npz")["geometry"]
+    assert dict(zip(GEOMETRY, saved.tolist())) == GEOMETRY
 
 
 # ----------------------------------------------------------------------------- learning
@@ -301,7 +345,8 @@ def copy_goal_task(rng, N, agent):
     b = obs[..., 5].argmax(1)
     goal = obs[np.arange(N), b]
     x_bins = np.linspace(-0.45, 0.45, agent.n_x)
-    acts = np.stack([b, np.abs(goal[:, 3:4] - x_bins).argmin(1), np.round(goal[:, 4] / 0.05 - 0.5)], 1)
+    acts = np.stack([b, np.abs(goal[:, 3:4] - x_bins).argmin(1),
+                     np.round(goal[:, 4] / 0.05 - 0.5)], 1)
     return obs, acts.astype(np.int64)
 
 
@@ -324,9 +369,12 @@ def test_ppo_update_raises_advantaged_action_and_fit_value():
     m = agent.ppo_update(obs, actions, logp, adv, values + adv, epochs=4, minibatch=16, clip=0.2,
                          ent_coef=0.01, vf_coef=0.5, lr=1e-3, max_grad_norm=0.5, rng=rng)
     change = ActionDist(agent.actor.forward(agent.features(obs)), 37).log_prob(actions) - logp
-    assert (change[adv > 0] > 0).all() and change[adv > 0].mean() > 0.03 and change[adv < 0].mean() < 0
-    assert set(m) == {"policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac", "explained_variance"}
-    assert all(np.isfinite(v) for v in m.values()) and m["approx_kl"] >= 0 and 0 <= m["clip_frac"] <= 1
+    assert ((change[adv > 0] > 0).all() and change[adv > 0].mean() > 0.03
+            and change[adv < 0].mean() < 0)
+    assert set(m) == {"policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac",
+                      "explained_variance"}
+    assert (all(np.isfinite(v) for v in m.values()) and m["approx_kl"] >= 0
+            and 0 <= m["clip_frac"] <= 1)
     target = obs[..., 5].sum(1) * 0.5 + obs[:, 0, 0]
     losses = agent.fit_value(obs, target, epochs=30, batch_size=16, lr=3e-3, rng=rng)
     assert losses[-1] < losses[0] / 10

@@ -1,6 +1,8 @@
-"""Tests of the block world: Gymnasium API, scattering, physics of stacking, rest detection, exact replay."""
+"""Tests of the block world: Gymnasium API, scattering, physics of stacking, rest detection, exact
+replay."""
 import warnings
 
+import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
@@ -25,11 +27,35 @@ def flat_state(xs):
 SPREAD = [-0.4, -0.25, -0.1, 0.05, 0.2, 0.35]
 
 
-def test_check_env_passes():
+def test_check_env_passes_with_warnings_as_errors():
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore")               # infinite Box bounds, no spec: warnings only
-        check_env(BlockWorld(6).unwrapped)
-        check_env(BlockWorld(3, render_mode="rgb_array").unwrapped)
+        warnings.simplefilter("error")                # a warning (e.g. unbounded spaces) fails
+        for kwargs in ({}, dict(n_blocks=3, render_mode="rgb_array"),
+                       dict(n_blocks=8, max_steps=4)):
+            check_env(gymnasium.make("taskexp/BlockWorld-v0", **kwargs).unwrapped)
+
+
+def test_registered_with_gymnasium_and_keywords_pass_through():
+    env = gymnasium.make("taskexp/BlockWorld-v0", n_blocks=7, max_steps=4)
+    assert (env.unwrapped.n_blocks, env.unwrapped.max_steps) == (7, 4)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == (7, 6) and env.observation_space.contains(obs)
+
+
+def test_step_before_reset_raises():
+    with pytest.raises(gymnasium.error.ResetNeeded, match="reset"):
+        BlockWorld(6).step([0, 0, 0])
+
+
+def test_observations_stay_inside_the_observation_space(env):
+    """Random actions, including falls off the table: every observation lies inside the bounds."""
+    rng = np.random.default_rng(5)
+    obs, _ = env.reset(seed=5)
+    for i in range(60):
+        obs, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        assert env.observation_space.contains(obs), obs
+        if terminated or truncated:
+            obs, _ = env.reset(seed=int(rng.integers(1000)))
 
 
 def test_reset_is_deterministic_given_the_seed(env):
@@ -51,13 +77,13 @@ def test_scatter_has_no_overlaps_and_keeps_goal_footprints_free(n):
         obs, _ = env.reset(seed=seed, options=options)
         s = env.get_state()
         assert np.all(s[:, 1] == BLOCK_H / 2) and np.all(s[:, 2:] == 0)
-        assert np.all(np.abs(s[:, 0]) <= 0.5 - BLOCK_W / 2 + 1e-12)                 # on the table
+        assert np.all(np.abs(s[:, 0]) <= 0.5 - BLOCK_W / 2 + 1e-12)     # on the table
         gaps = np.abs(s[:, None, 0] - s[None, :, 0]) + np.eye(n)
-        assert gaps.min() >= BLOCK_W - 1e-12                                          # no overlaps
+        assert gaps.min() >= BLOCK_W - 1e-12                              # no overlaps
         for b, (x, y) in env.goals.items():
             if n <= 6 or y < BLOCK_H:          # 8 blocks leave room for the ground goals' only
-                assert np.abs(s[:, 0] - x).min() >= BLOCK_W - 1e-12                   # footprint free
-            assert np.hypot(s[b, 0] - x, s[b, 1] - y) > THRESHOLD                     # not solved yet
+                assert np.abs(s[:, 0] - x).min() >= BLOCK_W - 1e-12       # footprint free
+            assert np.hypot(s[b, 0] - x, s[b, 1] - y) > THRESHOLD         # not solved yet
         assert obs.dtype == np.float32 and obs[:, 5].sum() == len(env.goals)
 
 
@@ -67,7 +93,8 @@ def test_step_onto_another_block_stacks_it(env):
     s = env.get_state()
     assert not info["noop"] and info["stable"] and 10 <= info["settle_steps"] < 60
     # resting contacts may penetrate by the slop (1 mm): a few mm and ~0.5 degree of play
-    assert abs(s[0, 0] - 0.05) < 3e-3 and abs(s[0, 1] - 1.5 * BLOCK_H) < 3e-3 and abs(s[0, 2]) < 0.02
+    assert (abs(s[0, 0] - 0.05) < 3e-3 and abs(s[0, 1] - 1.5 * BLOCK_H) < 3e-3
+            and abs(s[0, 2]) < 0.02)
     assert reward == 1.0 and terminated and info["success"] and not truncated
     assert np.abs(s[1:, :2] - flat_state(SPREAD)[1:, :2]).max() < 2e-3       # the others stayed
 
@@ -90,7 +117,8 @@ def test_goal_in_the_air_needs_a_support(env):
     _, reward, terminated, _, info = env.step(env.encode_action(1, 0.45, 1.5 * BLOCK_H))
     assert reward == 0.0 and not terminated and env.get_state()[1, 1] < BLOCK_H     # it fell
     env.reset(options={"state": flat_state(SPREAD), "goals": goals})
-    _, reward, terminated, _, _ = env.step(env.encode_action(0, 0.45, BLOCK_H / 2))  # build a support
+    # build a support
+    _, reward, terminated, _, _ = env.step(env.encode_action(0, 0.45, BLOCK_H / 2))
     assert reward == 0.0 and not terminated
     _, reward, terminated, truncated, info = env.step(env.encode_action(1, 0.45, 1.5 * BLOCK_H))
     assert reward == 1.0 and terminated and info["success"] and info["stable"] and not truncated
@@ -110,9 +138,10 @@ def test_tower_of_three_by_hand_is_stable_and_a_success(env):
 def test_no_rest_within_the_cap_is_unstable_and_no_success(env, monkeypatch):
     monkeypatch.setattr(env2d, "MAX_SUBSTEPS", 10)
     env.reset(options={"state": flat_state(SPREAD), "goals": {0: (0.45, BLOCK_H / 2)}})
-    _, reward, terminated, _, info = env.step(env.encode_action(0, 0.45, 3.5 * BLOCK_H))  # still falling
+    # still falling
+    _, reward, terminated, _, info = env.step(env.encode_action(0, 0.45, 3.5 * BLOCK_H))
     assert not info["stable"] and info["settle_steps"] == 10 and reward == 0.0 and not terminated
-    assert env.get_state()[0, 4] < -0.5                                                 # velocity kept
+    assert env.get_state()[0, 4] < -0.5                   # velocity kept
 
 
 def test_truncation_at_max_steps():
@@ -170,7 +199,8 @@ def test_declared_rest_is_real_rest(env):
             for _ in range(120):
                 env2d._space_step(env._space._space, env2d.DT)
             d = env._read()[:, :3] - before[:, :3]
-            assert (np.hypot(d[:, 0], d[:, 1]) + env2d.HALF_DIAG * np.abs(d[:, 2])).max() < env2d.REST_MOVE
+            assert ((np.hypot(d[:, 0], d[:, 1]) + env2d.HALF_DIAG * np.abs(d[:, 2])).max()
+                    < env2d.REST_MOVE)
             checked += 1
     assert checked > 50
 
@@ -209,6 +239,12 @@ def test_encode_decode_round_trip(env):
     (lambda e: e.encode_action(0, np.nan, 0.0), "nan"),
     (lambda e: BlockWorld(9), "n_blocks=9"),
     (lambda e: BlockWorld(6, render_mode="human"), "human"),
+    (lambda e: BlockWorld(6, max_steps=0), "max_steps=0"),
+    (lambda e: BlockWorld(6, max_steps=-3), "max_steps=-3"),
+    (lambda e: BlockWorld(6, max_steps=2.5), "max_steps=2.5"),
+    (lambda e: BlockWorld(6, max_steps=True), "max_steps=True"),
+    (lambda e: e.reset(options={"goals": {0: (0.0, 0.8)}}), "higher than 6 blocks"),
+    (lambda e: e.reset(options={"state": np.full((6, 6), 9.0)}), "outside the world"),
 ])
 def test_bad_inputs_raise_value_error(env, call, match):
     env.reset(seed=0)
@@ -231,7 +267,8 @@ def test_observation_and_is_success_helpers():
     obs = observation(state, {2: (0.1, 0.075)})
     assert obs.shape == (6, 6) and obs.dtype == np.float32
     assert np.allclose(obs[2, 3:], (0.1, 0.075, 1.0)) and not obs[[0, 1, 3, 4, 5], 3:].any()
-    assert is_success(state, {1: (-0.25 + 0.019, 0.025)}) and not is_success(state, {1: (-0.22, 0.025)})
+    assert (is_success(state, {1: (-0.25 + 0.019, 0.025)})
+            and not is_success(state, {1: (-0.22, 0.025)}))
 
 
 # ----------------------------------------------------------------------------- property-based
@@ -243,7 +280,8 @@ TABLE_EPS = 3 * env2d.SLOP      # resting blocks may sink by the allowed penetra
 
 
 def lowest_point(state):
-    """y of each block's lowest corner (n,): a rotated box reaches |cos a| h/2 + |sin a| w/2 below its centre."""
+    """y of each block's lowest corner (n,): a rotated box reaches |cos a| h/2 + |sin a| w/2 below
+    its centre."""
     a = state[:, 2]
     return state[:, 1] - 0.5 * (np.abs(np.cos(a)) * BLOCK_H + np.abs(np.sin(a)) * BLOCK_W)
 
@@ -255,13 +293,15 @@ def adversarial_action(draw, state):
                                     lambda seq: draw(st.sampled_from(seq)))
 
 
+# Its long lines stay (noqa): derandomize=True seeds hypothesis from the test's source, comments
+# aside, so reflowing it would change the examples it draws.
 @settings(max_examples=250, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(data=st.data(), n=st.integers(2, 8), seed=st.integers(0, 2**16), tower=st.booleans())
 def test_physics_never_breaks(data, n, seed, tower):
     """Up to 40 actions per example, ~5000 in all: teleports into blocks, far in the air, at the table's
     edge and onto tall stacks. After every action: finite state, every block on the table (not in
-    it) or on the catch floor, rest within the substep cap; at the end, exact replay from a saved state."""
+    it) or on the catch floor, rest within the substep cap; at the end, exact replay from a saved state."""  # noqa: E501
     env = BlockWorld(n, max_steps=10**6)
     env.reset(seed=seed)
     if tower:                                              # start from a tower as tall as it gets
@@ -277,9 +317,9 @@ def test_physics_never_breaks(data, n, seed, tower):
         assert s.shape == (n, 6)
         on_floor = s[:, 1] < -BLOCK_H                      # fell off: must lie on the catch floor
         assert (lowest_point(s)[~on_floor] > -TABLE_EPS).all(), ("block in the table", action, s)
-        assert (lowest_point(s)[on_floor] > env2d.FLOOR_Y - TABLE_EPS).all(), ("block through the floor", s)
+        assert (lowest_point(s)[on_floor] > env2d.FLOOR_Y - TABLE_EPS).all(), ("block through the floor", s)  # noqa: E501
         assert (np.abs(s[:, 0]) < 5).all(), ("block left the world", s)
-        assert info["noop"] or (info["stable"] and info["settle_steps"] <= env2d.MAX_SUBSTEPS), (action, info)
+        assert info["noop"] or (info["stable"] and info["settle_steps"] <= env2d.MAX_SUBSTEPS), (action, info)  # noqa: E501
     replay = BlockWorld(n, max_steps=10**6)
     replay.reset(options={"state": saved, "goals": env.goals})
     for action, s in zip(actions, states):

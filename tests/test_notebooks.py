@@ -32,15 +32,16 @@ def test_notebook_is_small_and_has_the_quick_switch(path):
     nb = nbformat.read(path, as_version=4)
     assert "TASKEXP_QUICK" in nb.cells[1].source, "the first code cell holds the quick switch"
     first = nb.cells[0].source
-    assert "PROVENANCE" not in first and "How these outputs were made" in first and "jupyter execute" in first, \
+    assert ("PROVENANCE" not in first and "How these outputs were made" in first
+            and "jupyter execute" in first), \
         "the first cell must say which command made its outputs and how long it took"
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=os.path.basename)
 def test_notebook_runs_in_quick_mode(path, monkeypatch, tmp_path):
     monkeypatch.setenv("TASKEXP_QUICK", "1")
-    monkeypatch.setenv("TASKEXP_RUNS", str(tmp_path / "runs"))     # never read the repository's runs/
-    monkeypatch.setenv("TMPDIR", str(tmp_path))                     # quick mode's runs land here
+    monkeypatch.setenv("TASKEXP_RUNS", str(tmp_path / "runs"))  # never read the repository's runs/
+    monkeypatch.setenv("TMPDIR", str(tmp_path))                  # quick mode's runs land here
     monkeypatch.setenv("MPLBACKEND", "module://matplotlib_inline.backend_inline")
     nb = nbformat.read(path, as_version=4)
     for cell in nb.cells:
@@ -49,9 +50,11 @@ def test_notebook_runs_in_quick_mode(path, monkeypatch, tmp_path):
     # raises CellExecutionError (naming the cell) on the first cell that raises
     NotebookClient(nb, timeout=600, kernel_name="python3",
                    resources={"metadata": {"path": os.path.dirname(path)}}).execute()
-    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs if o.output_type == "error"]
+    errors = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
+              if o.output_type == "error"]
     assert not errors
-    assert any(o.output_type == "display_data" for c in nb.cells if c.cell_type == "code" for o in c.outputs), \
+    assert any(o.output_type == "display_data"
+               for c in nb.cells if c.cell_type == "code" for o in c.outputs), \
         "a notebook that shows no picture"
 
 
@@ -71,7 +74,8 @@ def test_animate_gif_frames_and_html():
         durations.append(im.info["duration"])
     assert durations == [250, 250, 750]                  # the last frame is held 3x
     # per-frame goals and titles; html=True wraps the same bytes in an <img> tag
-    html = animate(np.stack(states), [None, env.goals, {1: (0.3, 0.075)}], ["a", "b", "c"], html=True)
+    html = animate(np.stack(states), [None, env.goals, {1: (0.3, 0.075)}], ["a", "b", "c"],
+                   html=True)
     assert html.startswith('<img src="data:image/gif;base64,') and html.endswith('">')
 
 

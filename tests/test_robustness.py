@@ -1,5 +1,7 @@
 """Robustness (issue 3): bad settings refused in one line, resume after a kill gives the same run,
 Ctrl-C says how to resume, NaN stops training with where it happened, memory stays flat."""
+import dataclasses
+import functools
 import gc
 import json
 import os
@@ -12,11 +14,13 @@ import numpy as np
 import pytest
 
 import agent as agent_module
+import cli
 import taskexp
 from agent import Agent
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TINY = ["--scale", "0.02"]
+PPO = dict(epochs=1, minibatch=16, clip=0.2, ent_coef=0.0, vf_coef=0.5, lr=1e-3, max_grad_norm=0.5)
 
 
 def results_without_clock(out):
@@ -26,10 +30,10 @@ def results_without_clock(out):
     return res
 
 
-def cli(*argv):
+def child(*argv):
     """Run taskexp.py in a child process (so it can be killed) with its output piped."""
-    return subprocess.Popen([sys.executable, "-u", os.path.join(ROOT, "taskexp.py"), *argv], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return subprocess.Popen([sys.executable, "-u", os.path.join(ROOT, "taskexp.py"), *argv],
+                            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
 # ----------------------------------------------------------------------------- the CLI
@@ -45,10 +49,15 @@ def cli(*argv):
     (["--resume"], "--resume needs --out"),
     (["--resume", "--out", "runs/x", "--seed", "2"], "drop --seed"),
     (["--resume", "--out", "/nonexistent/run"], "holds no readable run"),
+    (["--gamma", "1.5"], "--gamma must be <= 1"),
+    (["--ppo-lr", "0"], "--ppo-lr must be > 0"),
+    (["--max-stay", "6"], "--max-stay must be below --blocks"),
+    (["--shapes", "O"], "invalid choice"),
+    (["--resume", "--out", "runs/x", "--ppo-steps", "9"], "drop --ppo-steps"),
 ])
 def test_cli_refuses_bad_arguments_in_one_line(argv, reason, capsys):
     with pytest.raises(SystemExit) as e:
-        taskexp.parse_args(argv)
+        cli.parse_args(argv)
     err = capsys.readouterr().err.strip().splitlines()
     assert e.value.code == 2 and reason in err[-1] and "Traceback" not in "".join(err)
 
@@ -57,12 +66,49 @@ def test_cli_refuses_bad_arguments_in_one_line(argv, reason, capsys):
 def test_cli_refuses_a_directory_with_another_runs_files(tmp_path, leftover, capsys):
     (tmp_path / leftover).write_text("")
     with pytest.raises(SystemExit):
-        taskexp.parse_args(["--out", str(tmp_path)])
+        cli.parse_args(["--out", str(tmp_path)])
     assert f"already holds a run ({leftover})" in capsys.readouterr().err
 
 
+def test_out_that_is_a_file_is_refused_in_one_line(tmp_path, capsys):
+    (tmp_path / "f").write_text("")
+    with pytest.raises(SystemExit):
+        cli.parse_args(["--out", str(tmp_path / "f")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert "is a file" in err[-1] and "Traceback" not in "".join(err)
+
+
+def test_damaged_results_json_sends_the_user_nowhere_in_circles(tmp_path, capsys):
+    """A run whose results.json is damaged: with state.npz intact, --resume goes on from it; with
+    both damaged, a new run there is refused with what to do (delete), not with --resume."""
+    out = str(tmp_path / "run")
+    cli.main(["--rounds", "1", *TINY, "--out", out])
+    with open(os.path.join(out, "results.json"), "w") as f:
+        f.write("{broken")
+    cfg, _, resume, _ = cli.parse_args(["--resume", "--rounds", "2", "--out", out])
+    assert resume and cfg.rounds == 2
+    with open(os.path.join(out, "state.npz"), "w") as f:
+        f.write("broken")
+    for argv, phrase in ((["--out", out], "delete its files"),
+                         (["--resume", "--rounds", "2", "--out", out], "holds no readable run")):
+        with pytest.raises(SystemExit):
+            cli.parse_args(argv)
+        assert phrase in capsys.readouterr().err
+
+
+def test_every_config_field_is_a_flag():
+    """The flags are generated from taskexp.Config: each field can be set, with its docstring."""
+    help_text = cli.parser().format_help()
+    for f in dataclasses.fields(taskexp.Config):
+        assert cli.flag(f.name) in help_text, f.name
+        assert cli.field_docs(taskexp.Config).get(f.name), f"{f.name} has no docstring"
+    cfg, *_ = cli.parse_args(["--ppo-steps", "123", "--no-restrict", "--shapes", "I", "Y",
+                              "--p-add", "0.25", "--out", "unused"])
+    assert (cfg.ppo_steps, cfg.restrict, cfg.shapes, cfg.p_add) == (123, False, ("I", "Y"), 0.25)
+
+
 def test_blocks_flag_names_the_run_and_reaches_the_world(tmp_path):
-    cfg, out, _ = taskexp.parse_args(["--blocks", "7"])
+    cfg, out, _, _ = cli.parse_args(["--blocks", "7"])
     assert cfg.n_blocks == 7 and out == os.path.join("runs", "ours-7blocks-seed0")
 
 
@@ -72,8 +118,8 @@ def test_killed_run_resumes_to_the_same_results(tmp_path, capsys):
     """SIGKILL in round 2 (after round 1 is saved), then --resume: results.json and every checkpoint
     equal those of a run never stopped."""
     whole, killed = str(tmp_path / "whole"), str(tmp_path / "killed")
-    taskexp.main(["--rounds", "3", *TINY, "--out", whole])
-    p = cli("--rounds", "3", *TINY, "--out", killed)
+    cli.main(["--rounds", "3", *TINY, "--out", whole])
+    p = child("--rounds", "3", *TINY, "--out", killed)
     for line in p.stdout:
         if line.startswith("round 1:"):
             break
@@ -81,53 +127,59 @@ def test_killed_run_resumes_to_the_same_results(tmp_path, capsys):
     p.communicate()
     assert not os.path.exists(os.path.join(killed, "round3.npz"))
     capsys.readouterr()
-    taskexp.main(["--resume", "--out", killed])
+    cli.main(["--resume", "--out", killed])
     log = capsys.readouterr().out
     # went on from the saved round rather than starting again (which would also give equal files)
-    assert f"resuming {killed} after round " in log and "[round 0]" not in log and "round 1:" not in log
+    assert (f"resuming {killed} after round " in log and "[round 0]" not in log
+            and "round 1:" not in log)
     assert results_without_clock(killed) == results_without_clock(whole)
     for k in range(4):
-        with open(os.path.join(killed, f"round{k}.npz"), "rb") as a, open(os.path.join(whole, f"round{k}.npz"), "rb") as b:
+        with open(os.path.join(killed, f"round{k}.npz"), "rb") as a, \
+                open(os.path.join(whole, f"round{k}.npz"), "rb") as b:
             assert a.read() == b.read(), k
 
 
 def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
     """A 1-round run extended to 2 equals a 2-round run; a state from other settings is refused."""
     one, two = str(tmp_path / "one"), str(tmp_path / "two")
-    taskexp.main(["--rounds", "1", *TINY, "--out", one])
-    taskexp.main(["--resume", "--rounds", "2", "--out", one])
-    taskexp.main(["--rounds", "2", *TINY, "--out", two])
+    cli.main(["--rounds", "1", *TINY, "--out", one])
+    cli.main(["--resume", "--rounds", "2", "--out", one])
+    cli.main(["--rounds", "2", *TINY, "--out", two])
     assert results_without_clock(one) == results_without_clock(two)
-    cfg, _, _ = taskexp.parse_args(["--rounds", "3", *TINY, "--seed", "1", "--out", str(tmp_path / "new")])
-    with pytest.raises(ValueError, match=r"state.npz: saved by a run with other settings.*'seed': \(0, 1\)"):
-        taskexp.run(cfg, one, log=lambda *a: None, resume=True)
+    cfg, _, _, _ = cli.parse_args(["--rounds", "3", *TINY, "--seed", "1",
+                                   "--out", str(tmp_path / "new")])
+    with pytest.raises(ValueError,
+                       match=r"state.npz: saved by a run with other settings.*'seed': \(0, 1\)"):
+        cli.run(cfg, one, log=lambda *a: None, resume=True)
     with open(os.path.join(one, "state.npz"), "r+b") as f:    # a truncated state file
         f.truncate(1000)
     with pytest.raises(ValueError, match="state.npz: not a readable"):
-        taskexp.run(taskexp.parse_args(["--resume", "--rounds", "3", "--out", one])[0], one, resume=True)
+        cli.run(cli.parse_args(["--resume", "--rounds", "3", "--out", one])[0], one, resume=True)
     capsys.readouterr()
     with pytest.raises(SystemExit) as e:                      # the CLI says it in one line
-        taskexp.main(["--resume", "--rounds", "3", "--out", one])
+        cli.main(["--resume", "--rounds", "3", "--out", one])
     err = capsys.readouterr().err.strip().splitlines()
-    assert e.value.code == 2 and len(err) == 1 and "cannot resume" in err[0] and "state.npz: not a readable" in err[0]
+    assert (e.value.code == 2 and len(err) == 1 and "cannot resume" in err[0]
+            and "state.npz: not a readable" in err[0])
 
 
 def test_ctrl_c_stops_cleanly_and_says_how_to_resume(tmp_path):
     out = str(tmp_path / "run")
-    p = cli("--rounds", "3", *TINY, "--out", out)
+    p = child("--rounds", "3", *TINY, "--out", out)
     for line in p.stdout:
         if line.startswith("round 0:"):
             break
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130 and "Traceback" not in err
-    assert f"rounds 0..0 are saved in {out}; go on with:\n    python taskexp.py --resume --out {out}" in err
+    assert (f"rounds 0..0 are saved in {out}; go on with:\n"
+            f"    python taskexp.py --resume --out {out}") in err
 
 
 def test_tasks_survive_the_state_file_with_their_goal_order():
     s0 = np.random.default_rng(0).normal(size=(6, 6))
     tasks = [(s0, {3: (0.1, 0.025), 0: (-0.2, 0.075)}), (s0 + 1, {5: (0.3, 0.025)})]
-    back = taskexp.arrays_to_tasks(*taskexp.tasks_to_arrays(tasks, 6))
+    back = cli.arrays_to_tasks(*cli.tasks_to_arrays(tasks, 6))
     assert [list(g.items()) for _, g in back] == [list(g.items()) for _, g in tasks]
     assert all(np.array_equal(a, b) for (a, _), (b, _) in zip(back, tasks))
 
@@ -144,7 +196,8 @@ def test_nan_in_training_stops_with_phase_and_step():
         agent.bc(obs, acts, 2, 16, 1e-3, rng)
     agent = Agent(hidden=8)
     with pytest.raises(FloatingPointError, match="PPO update: inputs: non-finite advantages"):
-        agent.ppo_update(obs, acts, np.zeros(40), np.r_[np.inf, np.zeros(39)], np.zeros(40), rng=rng)
+        agent.ppo_update(obs, acts, np.zeros(40), np.r_[np.inf, np.zeros(39)], np.zeros(40),
+                         rng=rng, **PPO)
     with pytest.raises(FloatingPointError, match="value fit epoch 1 minibatch 1: non-finite loss"):
         agent.fit_value(obs, np.full(40, 1e300), 1, 16, 1e-3, rng)
     with pytest.raises(FloatingPointError, match="BC epoch 1: non-finite parameters phi.W0"):
@@ -157,9 +210,11 @@ def test_nan_in_a_run_names_round_and_update_and_main_says_so(tmp_path, monkeypa
     def broken(*args, **kwargs):
         loss, dout, info = real(*args, **kwargs)
         return np.nan, dout, info
-    monkeypatch.setattr(agent_module, "ppo_loss", broken)
+    # the CLI's training, with a loss that goes bad handed in as the method's ppo_loss
+    train = functools.partial(taskexp.train, pieces=taskexp.Pieces(ppo_loss=broken))
+    monkeypatch.setattr(taskexp, "train", train)
     with pytest.raises(SystemExit) as e:
-        taskexp.main(["--rounds", "1", *TINY, "--out", str(tmp_path)])
+        cli.main(["--rounds", "1", *TINY, "--out", str(tmp_path)])
     err = capsys.readouterr().err
     assert e.value.code == 1
     assert ("error: training diverged: round 0: PPO base update 1: PPO update epoch 1 minibatch 1: "
@@ -173,21 +228,19 @@ def test_memory_stays_flat_and_the_buffer_bounded(tmp_path):
     """Python-tracked memory (numpy arrays included) after each of 8 rounds grows by < 0.2 MB per
     round from round 2 on: a leak of every round's episodes measures +0.43 MB per round here,
     this code -0.06. And the demo buffer and task list hold at most buffer_size entries."""
-    cfg, _, _ = taskexp.parse_args(["--rounds", "7", *TINY, "--out", str(tmp_path)])
+    cfg, _, _, _ = cli.parse_args(["--rounds", "7", *TINY, "--out", str(tmp_path)])
     cfg.buffer_size = 300                                  # < the 400 base demos: the bound binds
     after = []
 
-    def log(msg):
-        if msg.startswith("round "):
-            gc.collect()
-            after.append(tracemalloc.get_traced_memory()[0] / 2**20)
+    def measure(k, agent, run, rng):
+        gc.collect()
+        after.append(tracemalloc.get_traced_memory()[0] / 2**20)
     tracemalloc.start()
     try:
-        taskexp.run(cfg, str(tmp_path), log=log)
+        run = taskexp.train(cfg, on_round=measure, log=lambda *a: None)
     finally:
         tracemalloc.stop()
     slope = np.polyfit(np.arange(len(after) - 2), after[2:], 1)[0]
     assert len(after) == 8 and slope < 0.2, (slope, after)
-    state = np.load(tmp_path / "state.npz")
-    assert len(state["buffer_act"]) == len(state["buffer_obs"]) == 300
-    assert len(state["all_tasks.states"]) <= 300
+    assert len(run.buffer_act) == len(run.buffer_obs) == 300
+    assert len(run.all_tasks) <= 300

@@ -1,13 +1,15 @@
-"""Tests of the pipeline: task sampling, goal selection, relabelling, shapes, and the CLI end to end."""
+"""Tests of the pipeline: task sampling, goal selection, relabelling, shapes, and the CLI end to
+end."""
 import json
 import os
 
 import numpy as np
 import pytest
 
+import cli
 import taskexp
 from agent import Agent
-from env2d import BLOCK_H, BlockWorld, is_success
+from env2d import BLOCK_H, BlockWorld, is_success, layer
 
 
 @pytest.fixture
@@ -76,7 +78,7 @@ def test_shapes_are_held_out_and_buildable(env, name):
     rng = np.random.default_rng(2)
     for _ in range(5):
         goals = taskexp.shape_goals(name, env, rng)
-        high = [b for b, (_, y) in goals.items() if taskexp.layer(y) >= 1]
+        high = [b for b, (_, y) in goals.items() if layer(y) >= 1]
         assert len(goals) >= 4 and len(high) >= 3
         obs, _ = env.reset(seed=int(rng.integers(1000)), options={"goals": goals})
         # build bottom-up by hand; the finished shape must stand and count as success
@@ -88,7 +90,7 @@ def test_shapes_are_held_out_and_buildable(env, name):
 
 def run_cli(tmp_path, *extra):
     out = str(tmp_path / "run")
-    taskexp.main(["--rounds", "1", "--scale", "0.02", "--out", out, *extra])
+    cli.main(["--rounds", "1", "--scale", "0.02", "--out", out, *extra])
     with open(os.path.join(out, "results.json")) as f:
         return out, json.load(f)
 
@@ -106,19 +108,22 @@ def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
 
 
 def test_same_seed_same_results_different_seed_different(tmp_path):
-    runs = [run_cli(tmp_path / name, "--seed", seed) for name, seed in (("a", "3"), ("b", "3"), ("c", "4"))]
+    runs = [run_cli(tmp_path / name, "--seed", seed)
+            for name, seed in (("a", "3"), ("b", "3"), ("c", "4"))]
     strip = [{k: v for k, v in r.items() if k != "wallclock"} for _, r in runs]
     files = [open(os.path.join(out, "round1.npz"), "rb").read() for out, _ in runs]
     assert strip[0] == strip[1] and files[0] == files[1]
     assert files[0] != files[2]
 
 
-@pytest.mark.parametrize("flags", [["--select", "init2new", "--no-restrict"], ["--baseline", "direct-ppo"]])
+@pytest.mark.parametrize("flags", [["--select", "init2new", "--no-restrict"],
+                                   ["--baseline", "direct-ppo"]])
 def test_cli_ablations_run(tmp_path, flags):
     _, res = run_cli(tmp_path, *flags)
     assert [r["round"] for r in res["rounds"]] == [0, 1]
     cfg = res["config"]
-    assert (cfg["select"], cfg["restrict"]) == ("init2new", False) or cfg["baseline"] == "direct-ppo"
+    assert ((cfg["select"], cfg["restrict"]) == ("init2new", False)
+            or cfg["baseline"] == "direct-ppo")
 
 
 def test_ppo_batch_returns_are_lambda_returns():
@@ -139,5 +144,6 @@ def test_ppo_batch_returns_are_lambda_returns():
             a = r + cfg.gamma * v_next - v[k] + cfg.gamma * cfg.gae_lambda * a * (k + 1 < T)
             out.append(a + v[k])
         expected += out[::-1]
-    assert np.allclose(ret, expected) and np.allclose(adv, np.array(expected) - np.r_[t1.values, t2.values])
+    assert (np.allclose(ret, expected)
+            and np.allclose(adv, np.array(expected) - np.r_[t1.values, t2.values]))
     assert np.isclose(ret[2], 1.0) and np.isclose(ret[4], 0.0)      # success step; failed end

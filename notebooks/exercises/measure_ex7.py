@@ -5,14 +5,12 @@ minimum gain in exercises.EX7 were chosen from these figures.  ~40 s per run on 
     python notebooks/exercises/measure_ex7.py reference 0 1 2 3 4
     python notebooks/exercises/measure_ex7.py ppo_sign 0 1        # ... or any name in VARIANTS
 """
-import os
 import sys
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", ".."))
-import numpy as np  # noqa: E402
+import numpy as np
 
-import agent  # noqa: E402
-import exercises  # noqa: E402
+import agent
+import exercises
 
 R = exercises.REFERENCE
 
@@ -63,7 +61,8 @@ def mlp_no_tanh(params, hs, dout):
     return grads, d
 
 
-VARIANTS = dict(reference={}, ppo_sign=dict(ppo_loss=ppo_sign), ppo_mask_inverted=dict(ppo_loss=ppo_mask_inverted),
+VARIANTS = dict(reference={}, ppo_sign=dict(ppo_loss=ppo_sign),
+                ppo_mask_inverted=dict(ppo_loss=ppo_mask_inverted),
                 ppo_entropy_only=dict(ppo_loss=ppo_entropy_only),
                 gae_delta_sign=dict(gae=gae_delta_sign), gae_off_by_one=dict(gae=gae_off_by_one),
                 mlp_no_tanh=dict(mlp_backward=mlp_no_tanh))
@@ -74,4 +73,5 @@ if __name__ == "__main__":
         pieces = {f: R[f] for f in ("gae", "ppo_loss", "mlp_backward")}
         pieces.update(VARIANTS[name])
         before, after, secs = exercises.base_policy_success(seed=seed, **pieces)
-        print(f"{name:18s} seed {seed}: BC {before:.3f} -> PPO {after:.3f}  ({secs:.0f} s)", flush=True)
+        print(f"{name:18s} seed {seed}: BC {before:.3f} -> PPO {after:.3f}  ({secs:.0f} s)",
+              flush=True)

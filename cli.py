@@ -1,0 +1,359 @@
+"""cli.py -- the plumbing around taskexp.train: command-line flags generated from taskexp.Config,
+the run directory, checkpoints after every round, resuming a stopped run, and progress bars.
+
+    python taskexp.py --rounds 3            # the same as `taskexp --rounds 3` once installed
+    python taskexp.py --help                         # every Config field is a flag
+
+A run directory holds round{k}.npz (the agent after round k, for agent.Agent.load), state.npz
+(everything --resume needs to go on exactly as if never stopped), results.json, and the figures.
+"""
+import argparse
+import ast
+import glob
+import inspect
+import json
+import os
+import sys
+import time
+import zipfile
+from dataclasses import asdict, fields
+from functools import partial
+
+import numpy as np
+from tqdm import tqdm
+
+import report
+import taskexp
+from agent import Agent
+from env2d import N_X
+from taskexp import SHAPES, Config, RunState
+
+# --------------------------------------------------------------------------------------------
+# Flags: one per Config field, its help text the field's docstring
+# --------------------------------------------------------------------------------------------
+
+CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",),
+           "shapes": tuple(SHAPES)}
+MIN_ZERO = {"seed", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add"}
+AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
+SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes")
+RUN_FILES = ("results.json", "state.npz", "round*.npz")      # what a run leaves in its directory
+
+
+def field_docs(cls):
+    """{field name: its docstring} of a dataclass whose fields are followed by string literals."""
+    try:
+        body = ast.parse(inspect.getsource(cls)).body[0].body
+    except (OSError, TypeError):                               # no source (a frozen install)
+        return {}
+    return {a.target.id: " ".join(b.value.value.split()) for a, b in zip(body, body[1:])
+            if isinstance(a, ast.AnnAssign) and isinstance(b, ast.Expr)
+            and isinstance(b.value, ast.Constant) and isinstance(b.value.value, str)}
+
+
+def flag(name):
+    return "--blocks" if name == "n_blocks" else "--" + name.replace("_", "-")
+
+
+def parser():
+    p = argparse.ArgumentParser(prog="taskexp", description=taskexp.__doc__.split("\n")[0])
+    docs, d = field_docs(Config), Config()
+    for f in fields(Config):
+        default = getattr(d, f.name)
+        kw = dict(default=None, dest=f.name, help=f"{docs.get(f.name, '')} (default {default!r})")
+        names = [flag(f.name)] + (["--n-blocks"] if f.name == "n_blocks" else [])
+        if f.type is bool:
+            kw["action"] = argparse.BooleanOptionalAction
+        elif f.type is tuple:
+            kw["nargs"] = "+"
+        else:
+            kw["type"] = f.type
+        if f.name in CHOICES:
+            kw["choices"] = CHOICES[f.name]
+        p.add_argument(*names, **kw)
+    p.add_argument("--out", default=None,
+                   help="output directory (default runs/<settings>-seed<seed>)")
+    p.add_argument("--scale", type=float, default=None,
+                   help="multiply every data and step budget (0.05: a smoke test whose "
+                        "numbers mean nothing; default 1)")
+    p.add_argument("--resume", action="store_true",
+                   help="go on from the last complete round of the run in --out, with its settings "
+                        "(--rounds may raise the number of rounds)")
+    return p
+
+
+def problem(cfg):
+    """The first setting of cfg that no run can use, as a one-line reason, or None."""
+    need = max(len(SHAPES[s]) for s in cfg.shapes)
+    if not need <= cfg.n_blocks <= 8:
+        return (f"--blocks must be in {need}..8 (the held-out shapes need {need} blocks, the table "
+                f"holds 8), got {cfg.n_blocks}")
+    for f in fields(Config):
+        v = getattr(cfg, f.name)
+        if f.type in (int, float):
+            low = 0 if f.name in MIN_ZERO else 1 if f.type is int else None
+            if (v < low) if low is not None else not v > 0:
+                return f"{flag(f.name)} must be {'> 0' if low is None else f'>= {low}'}, got {v}"
+            if f.name in AT_MOST_ONE and v > 1:
+                return f"{flag(f.name)} must be <= 1, got {v}"
+    if cfg.max_stay >= cfg.n_blocks:
+        return f"--max-stay must be below --blocks ({cfg.n_blocks}), got {cfg.max_stay}"
+    return None
+
+
+def saved_results(out):
+    """(results of the run in `out`, None), or (None, why not). results.json is read first; if it
+    is damaged, the copy inside state.npz (written just before it) serves."""
+    why = []
+    for name in ("results.json", "state.npz"):
+        path = os.path.join(out, name)
+        try:
+            if name == "results.json":
+                with open(path) as f:
+                    results = json.load(f)
+            else:
+                with np.load(path, allow_pickle=False) as z:
+                    results = json.loads(str(z["results"]))
+            results["rounds"][-1]["round"], Config(**results["config"])
+            return results, None
+        except FileNotFoundError:
+            why.append(f"no {name}")
+        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError, EOFError,
+                zipfile.BadZipFile) as e:
+            why.append(f"{name} unreadable: {type(e).__name__}")
+    return None, " and ".join(why)
+
+
+def parse_args(argv=None):
+    """-> (Config, output directory, resume?, scale). Bad settings: a one-line reason, exit 2."""
+    p = parser()
+    a = p.parse_args(argv)
+    given = {f.name: getattr(a, f.name) for f in fields(Config) if getattr(a, f.name) is not None}
+    if "shapes" in given:
+        given["shapes"] = tuple(given["shapes"])
+    if a.out is not None and os.path.isfile(a.out):
+        p.error(f"--out {a.out} is a file; name a directory for the run")
+    if a.resume:
+        others = sorted(set(given) - {"rounds"}) + (["scale"] if a.scale is not None else [])
+        if others:
+            p.error(f"--resume uses the settings saved in --out; drop {flag(others[0])}")
+        if a.out is None:
+            p.error("--resume needs --out, the directory of the run to go on with")
+        results, why = saved_results(a.out)
+        if results is None:
+            p.error(f"--resume: {a.out} holds no readable run ({why}); "
+                    f"start a new run with --out {a.out} and no --resume")
+        cfg = Config(**{**results["config"], "shapes": tuple(results["config"]["shapes"])})
+        cfg.rounds = given.get("rounds", cfg.rounds)
+        done = results["rounds"][-1]["round"]
+        if done >= cfg.rounds:
+            p.error(f"--resume: {a.out} has finished all {cfg.rounds} rounds; "
+                    "pass a larger --rounds to extend it")
+        if problem(cfg):
+            p.error(problem(cfg))
+        return cfg, a.out, True, 1.0
+    cfg = Config(**given)
+    if problem(cfg):
+        p.error(problem(cfg))
+    scale = 1.0 if a.scale is None else a.scale
+    if not 0 < scale <= 100:
+        p.error(f"--scale must be in (0, 100], got {scale}")
+    for name in SCALED if scale != 1.0 else ():
+        setattr(cfg, name, max(4, int(round(getattr(cfg, name) * scale))))
+    tag = cfg.baseline or f"{cfg.select}{'' if cfg.restrict else '-norestrict'}"
+    tag += "" if cfg.n_blocks == Config.n_blocks else f"-{cfg.n_blocks}blocks"
+    out = a.out or os.path.join("runs", f"{tag}-seed{cfg.seed}")
+    found = sorted(f for pattern in RUN_FILES for f in glob.glob(os.path.join(glob.escape(out),
+                                                                              pattern)))
+    if found:
+        what = f"{out} already holds a run ({os.path.basename(found[0])})"
+        results, why = saved_results(out)
+        if results is None:
+            p.error(f"{what} that cannot be resumed ({why}); delete its files or choose "
+                    "another --out")
+        p.error(f"{what}; continue it with --resume --out {out}, or choose another --out")
+    return cfg, out, False, scale
+
+
+# --------------------------------------------------------------------------------------------
+# Checkpoints: after every round, state.npz holds all a run needs to go on as if never stopped
+# --------------------------------------------------------------------------------------------
+
+STATE_VERSION = 1
+STATE_KEYS = ("state_version", "round", "results", "run_rng", "buffer_obs", "buffer_act",
+              "all_tasks.states", "all_tasks.goals", "prev_tasks.states", "prev_tasks.goals")
+
+
+class ResumeError(ValueError):
+    """state.npz is missing, unreadable, or from a run with other settings."""
+
+
+def tasks_to_arrays(tasks, n_blocks):
+    """[(s0 (n, 6), {block: (x, y)})] -> states (N, n, 6), goals (N, n, 3) of x, y and the goal's
+    place in the dict (nan: no goal). The order matters: alter() draws from list(goals)."""
+    states = np.stack([s0 for s0, _ in tasks])
+    goals = np.full((len(tasks), n_blocks, 3), np.nan)
+    for i, (_, g) in enumerate(tasks):
+        for order, (b, (x, y)) in enumerate(g.items()):
+            goals[i, b] = (x, y, order)
+    return states, goals
+
+
+def arrays_to_tasks(states, goals):
+    """Inverse of tasks_to_arrays."""
+    out = []
+    for s0, g in zip(states, goals):
+        blocks = sorted(np.flatnonzero(~np.isnan(g[:, 2])), key=lambda b: g[b, 2])
+        out.append((s0, {int(b): (float(g[b, 0]), float(g[b, 1])) for b in blocks}))
+    return out
+
+
+def save_state(path, agent, run, rng):
+    """After a round: the agent with its optimiser, the run's Generator, the RunState."""
+    arrays = {"state_version": np.array(STATE_VERSION), "round": np.array(run.last_round),
+              "results": np.array(json.dumps(run.results)),
+              "run_rng": np.array(json.dumps(rng.bit_generator.state)),
+              "buffer_obs": run.buffer_obs, "buffer_act": run.buffer_act, **agent.training_state()}
+    for name in ("all_tasks", "prev_tasks"):
+        arrays[f"{name}.states"], arrays[f"{name}.goals"] = tasks_to_arrays(getattr(run, name),
+                                                                            agent.n_blocks)
+    agent.save(path, extra=arrays)
+
+
+def load_state(path, cfg, rng):
+    """Read what save_state wrote for a run with settings cfg; restore rng -> (agent, RunState).
+    ValueError naming the file when it is unreadable or from other settings."""
+    template = Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden)
+    saved, data = Agent.load(path, extra=STATE_KEYS + tuple(template.training_state()))
+    if int(data["state_version"]) != STATE_VERSION:
+        raise ValueError(f"{path}: state_version {data['state_version']}, expected {STATE_VERSION}")
+    results = json.loads(str(data["results"]))
+    ours, theirs = asdict(cfg), dict(results["config"])
+    ours["shapes"], theirs["rounds"] = list(ours["shapes"]), ours["rounds"]   # rounds may grow
+    if ours != theirs:
+        diff = {k: (theirs.get(k), v) for k, v in ours.items() if theirs.get(k) != v}
+        raise ValueError(f"{path}: saved by a run with other settings (saved, now): {diff}")
+    results["config"] = asdict(cfg)
+    saved.load_training_state(data, path)
+    rng.bit_generator.state = json.loads(str(data["run_rng"]))
+    run = RunState(last_round=int(data["round"]), buffer_obs=data["buffer_obs"],
+                   buffer_act=data["buffer_act"], results=results)
+    for name in ("all_tasks", "prev_tasks"):
+        setattr(run, name, arrays_to_tasks(data[f"{name}.states"], data[f"{name}.goals"]))
+    return saved, run
+
+
+def save_json(path, obj):
+    """Write JSON atomically (a temporary file, then a rename), like agent.save_npz: a run
+    killed mid-write leaves the previous file intact."""
+    tmp = f"{path}.tmp{os.getpid()}"
+    try:
+        with open(tmp, "w") as f:
+            json.dump(obj, f, indent=1)
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+
+
+def peak_memory_mb():
+    """Peak resident memory of this process so far (MB), or None where `resource` is missing."""
+    try:
+        import resource
+    except ImportError:                                      # Windows
+        return None
+    kb = 2**20 if sys.platform == "darwin" else 2**10        # ru_maxrss: bytes on macOS, else kB
+    return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / kb)
+
+
+# --------------------------------------------------------------------------------------------
+# A run in a directory
+# --------------------------------------------------------------------------------------------
+
+# tqdm on a terminal; nothing when the output goes to a file, so logs stay readable
+terminal_bar = partial(tqdm, leave=False, disable=None, dynamic_ncols=True)
+
+
+def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar):
+    """taskexp.train with a checkpoint after every round; returns the results dict.
+
+    After round k: round{k}.npz, state.npz and results.json. resume=True goes on from the last
+    complete round and gives the same results as a run never stopped.
+    """
+    os.makedirs(out_dir, exist_ok=True)
+    rng = np.random.default_rng(cfg.seed)
+    state_path = os.path.join(out_dir, "state.npz")
+    agent, state = None, None
+    if resume:
+        try:
+            agent, state = load_state(state_path, cfg, rng)
+        except (OSError, ValueError) as e:
+            raise ResumeError(f"cannot resume: {e}") from None
+        # state.npz is written before results.json: a kill between the two leaves results.json
+        # a round behind, or damaged
+        save_json(os.path.join(out_dir, "results.json"), state.results)
+        log(f"resuming {out_dir} after round {state.last_round}")
+    clock = state.results["wallclock"] if state else {}
+    t_start = time.time() - clock.get("total_s", 0.0)
+    t_round = [time.time()]
+
+    def checkpoint(k, agent, run, rng):
+        clock = run.results["wallclock"]
+        clock[f"round{k}_s"] = round(time.time() - t_round[0], 1)
+        clock["total_s"] = round(time.time() - t_start, 1)
+        clock["peak_memory_mb"] = peak_memory_mb()
+        agent.save(os.path.join(out_dir, f"round{k}.npz"))
+        save_state(state_path, agent, run, rng)                  # the commit point of round k
+        save_json(os.path.join(out_dir, "results.json"), run.results)
+        ev = run.results["rounds"][-1]["eval"]
+        log(f"round {k}: zero-shot " + ", ".join(f"{s} {v:.0%}" for s, v in ev.items())
+            + f"  ({clock['total_s']:.0f}s so far, peak memory {clock['peak_memory_mb']} MB)")
+        t_round[0] = time.time()
+
+    return taskexp.train(cfg, agent, state, rng, on_round=checkpoint, bar=bar, log=log).results
+
+
+def saved_round(out):
+    """The last complete round of the run in `out`, or -1 if there is none."""
+    results, _ = saved_results(out)
+    return -1 if results is None else results["rounds"][-1]["round"]
+
+
+def how_to_go_on(out):
+    """What a stopped run left in `out`, and how to go on from it."""
+    k = saved_round(out)
+    if k < 0:
+        return f"no round was complete, so there is nothing to resume in {out}."
+    return (f"rounds 0..{k} are saved in {out}; go on with:\n"
+            f"    python taskexp.py --resume --out {out}")
+
+
+def main(argv=None):
+    cfg, out, resume, scale = parse_args(argv)
+    note = (f"note: --scale {scale:g} shrinks every budget: this run tests the code, and its "
+            "success rates say nothing about the method")
+    if scale != 1.0:
+        print(note)
+    try:
+        results = run(cfg, out, resume=resume)
+        print()
+        print(report.tables(results))
+        for path in report.figures(results, out):
+            print("wrote", path)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted; {how_to_go_on(out)}", file=sys.stderr)
+        sys.exit(130)
+    except ResumeError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+    except FloatingPointError as e:
+        print(f"\nerror: training diverged: {e}\n{how_to_go_on(out)}", file=sys.stderr)
+        sys.exit(1)
+    print(f"wrote {out}/results.json, state.npz (for --resume) and round0..{cfg.rounds}.npz "
+          f"in {results['wallclock']['total_s']:.0f}s")
+    if scale != 1.0:
+        print(note)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,91 @@
+"""config.py -- every hyperparameter of a run in one documented dataclass (CleanRL-style).
+
+Each field's docstring says what it is, the section of the paper it belongs to, and why an unusual
+value was chosen; cli.py turns every field into a command-line flag with that text as its help.
+"""
+from dataclasses import dataclass
+
+
+@dataclass
+class Config:
+    """Every hyperparameter of a run, with the section of the paper it belongs to. The defaults
+    are the laptop run the README reports; `python taskexp.py --help` lists them as flags."""
+    seed: int = 0
+    """seeds the run's Generator, the networks and the evaluation scenes"""
+    rounds: int = 3
+    """rounds of task expansion + self-distillation after the base skills (sec 4.2-4.3)"""
+    n_blocks: int = 6
+    """blocks in the world; the held-out shapes need 6 and the table holds 8"""
+    max_steps: int = 10
+    """actions per episode before it counts as failed"""
+    short_steps: int = 3
+    """action budget of the verification run from s_T (sec 4.2) and of the stretch tasks"""
+    hidden: int = 128
+    """width of the actor's and the critic's per-block networks"""
+    n_envs: int = 32
+    """environments stepped in lockstep, one batched policy call per step"""
+
+    base_demos: int = 20000
+    """sec 4.1: single-block demonstrations for behaviour cloning"""
+    warmup: int = 8
+    """sec 4.1: up to this many random moves before a demo, so that demos see stacks of every
+    height; the paper starts from scattered scenes (warmup = 0)"""
+    max_stay: int = 2
+    """sec 4.1: up to this many "stay where you are" goals for other blocks in a base task"""
+    bc_epochs: int = 8
+    """BC epochs over the demos (sec 4.1) and over the generated data (sec 4.3)"""
+    bc_batch: int = 256
+    """BC minibatch size"""
+    bc_lr: float = 1e-3
+    """BC Adam learning rate"""
+
+    ppo_steps: int = 20000
+    """environment steps per PPO phase (base fine-tuning, self-distillation, direct PPO); the
+    paper used ~150M per round on a cluster"""
+    ppo_episodes: int = 256
+    """episodes per PPO update"""
+    stretch: float = 0.5
+    """not in the paper: extra episodes per PPO update, as a fraction of ppo_episodes, on
+    one-alteration variants of the tasks, so that V(s, g) learns what it cannot reach yet"""
+    ppo_epochs: int = 4
+    """PPO epochs over each batch"""
+    ppo_minibatch: int = 256
+    """PPO minibatch size"""
+    ppo_lr: float = 3e-4
+    """PPO Adam learning rate (actor and critic)"""
+    clip: float = 0.2
+    """PPO ratio clip epsilon"""
+    ent_coef: float = 0.003
+    """entropy bonus; small, as BC already spread the policy over sensible actions"""
+    vf_coef: float = 0.5
+    """value loss weight (with separate networks and Adam, it acts only through the grad clip)"""
+    max_grad_norm: float = 0.5
+    """global gradient-norm clip per network"""
+    gamma: float = 0.9
+    """discount; below 1 so that V(s, g) also says how many steps the goal is away"""
+    gae_lambda: float = 0.95
+    """GAE lambda"""
+
+    expand_episodes: int = 3000
+    """sec 4.2: attempts on the previous round's tasks per round"""
+    candidates: int = 64
+    """sec 4.2: K, the one-alteration candidates drawn per successful trajectory"""
+    p_add: float = 0.5
+    """sec 4.2: probability that an alteration adds a goal (else it modifies one)"""
+    select: str = "ours"
+    """sec 4.2: goal selection, ours (eq. 1) | end2new | init2new (Table 3 ablations)"""
+    restrict: bool = True
+    """sec 4.2: one alteration; False draws unrelated random tasks (Table 3 "w/o restriction")"""
+
+    buffer_size: int = 60000
+    """sec 4.3: demo steps, and tasks, kept for self-distillation (oldest dropped): the memory
+    bound of a long run"""
+
+    eval_episodes: int = 100
+    """sec 5: fixed evaluation scenes per shape, the same after every round"""
+    eval_salt: int = 12345
+    """sec 5: the evaluation scenes come from the Generator seeded with [seed, eval_salt]"""
+    baseline: str = ""
+    """sec 5.3: "direct-ppo" replaces task expansion by PPO on the evaluation tasks"""
+    shapes: tuple = ("I", "Y", "3T")
+    """sec 5: the held-out shapes evaluated after every round"""
