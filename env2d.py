@@ -1,4 +1,4 @@
-"""env2d.py -- the 2D side-view block world of taskexp (pymunk physics, Gymnasium API). ~420 lines.
+"""env2d.py -- the 2D side-view block world of taskexp (pymunk physics, Gymnasium API).
 
 The world of "Self-Generating Data for Goal-Conditioned Compositional Problems" (Yuan, Li, Wu), sec
 5, seen from the side: n_blocks rigid blocks (10 cm x 5 cm, 0.1 kg) on a table one metre wide,
@@ -9,8 +9,9 @@ overlaps another block makes the action a no-op -- the hand never pushes. A bloc
 falls; a block put half over an edge may topple; a block that falls off the table lands on a catch
 floor half a metre below and stays in the state (its y is negative). A task is a set of goals
 {block: (x, y)}; it is solved when every goal block rests within THRESHOLD of its target. The state
-is the array (n_blocks, 6) of x, y, angle, vx, vy, w, and the space is rebuilt from it at every
-step, so a step depends on (state, action) alone, bit for bit: a saved state replays exactly.
+is the array (n_blocks, 6) of x, y, angle, vx, vy, w, and the physics is reset to it at every step
+(as good as a new pymunk Space, see BlockWorld._load), so a step depends on (state, action) alone,
+bit for bit: a saved state replays exactly.
 """
 import math
 
@@ -44,25 +45,43 @@ FRICTION = 0.8
 SLOP = 0.001                                # allowed penetration (m); resting blocks sink this much
 # BIAS: fraction of an overlap left after one second; 0.9 ** 60 is chipmunk's default (a tenth of it
 # corrected per substep). A stiffer 0.5 ** 60 settled most drops in fewer substeps, but it pumped
-# energy into tall stacks near the table's edge, which then rocked for 20 s or more.
+# energy into tall stacks near the table's edge, which then rocked for 20 s or more. On
+# bench_settle.py's 88,000 actions, 0.8 ** 60 took 23% fewer substeps but one action hit the cap;
+# 0.85 ** 60 took 13% fewer, but the slowest took 750 substeps (515 now) and 4% of the outcomes
+# changed (a block ending over 1 cm or 0.1 rad elsewhere; moving DROP_GAP by 0.1 mm changes 1.4%).
 BIAS = 0.9 ** 60
 DROP_GAP = 0.0005                           # teleport this far above the layer centre
+# Most substeps of a drop are spent after the impact: in the substep of contact a falling block
+# sinks into its support by up to its travel in one substep (3 cm at 1.8 m/s), and the overlap
+# correction then lifts it out for ~35 substeps. Falling in closed form down to the contact took a
+# third fewer substeps, but it changed 14% of the outcomes, so the fall is simulated.
 FLOOR_Y = -0.5                              # the catch floor under the table
-# Rest: REST_SUBSTEPS consecutive substeps with |v| < REST_V, |w| < REST_W and no point of any block
-# further than REST_MOVE from where it was when the quiet run began; at most MAX_SUBSTEPS (see _settle).
-# The cap is 20 s. Over 88,000 random and adversarial actions (python bench/bench_settle.py) the
-# slowest came to rest after 515 substeps (8.6 s; 99.9% within 140): tall towers rocking at the edge.
+# Rest: REST_SUBSTEPS consecutive substeps with |v| < REST_V, |w| < REST_W and no point of any
+# block further than REST_MOVE from where it was when the quiet run began; at most MAX_SUBSTEPS
+# (see _settle). The cap is 20 s. Over 88,000 random and adversarial actions (python
+# bench/bench_settle.py) the slowest came to rest after 515 substeps (8.6 s; 99.9% within 140):
+# tall towers rocking at the edge.
 REST_V, REST_W, REST_MOVE, REST_SUBSTEPS, MAX_SUBSTEPS = 0.01, 0.05, 0.0005, 10, 1200
-CHECK_EVERY = 5                             # read the bodies every 5th substep (a read + test ~ a step)
-HALF_DIAG = 0.5 * np.hypot(BLOCK_W, BLOCK_H)  # a rotation dtheta moves a corner by <= HALF_DIAG*dtheta
+CHECK_EVERY = 5                             # read the bodies every 5th substep
+# a rotation dtheta moves a corner by <= HALF_DIAG * dtheta
+HALF_DIAG = 0.5 * np.hypot(BLOCK_W, BLOCK_H)
 # |(dx, dy, dangle, vx, vy, w)| @ REST_CRITERIA: the three rest measures, each over its threshold
 REST_CRITERIA = np.array([[1, 0, 0], [1, 0, 0], [HALF_DIAG, 0, 0], [0, 1, 0], [0, 1, 0], [0, 0, 1]]
                          ) / np.array([REST_MOVE, REST_V, REST_W])
 OVERLAP_TOL = SLOP                          # penetration tolerated when testing a teleport pose
 # pymunk's Space.step wraps chipmunk's cpSpaceStep with bookkeeping for callbacks and deferred
-# adds/removes, which we do not use; that costs a fifth of a substep, so _settle calls chipmunk directly.
-_space_step = pymunk._chipmunk_cffi.lib.cpSpaceStep
-_update_position = pymunk._chipmunk_cffi.lib.cpBodyUpdatePosition     # see _load
+# adds/removes, which we do not use; that costs a fifth of a substep, so _settle calls chipmunk
+# directly.
+# Likewise _load and _refresh call chipmunk's functions, where pymunk's wrappers would cost more
+# than what they wrap.
+_lib, _ffi = pymunk._chipmunk_cffi.lib, pymunk._chipmunk_cffi.ffi
+_space_step = _lib.cpSpaceStep
+_update_position, _remove_shape, _add_shape = (_lib.cpBodyUpdatePosition, _lib.cpSpaceRemoveShape,
+                                               _lib.cpSpaceAddShape)
+_set_shape_id_counter, _set_current_time_step = (_lib.cpSpaceSetShapeIDCounter,
+                                                 _lib.cpSpaceSetCurrentTimeStep)
+_each_body = _lib.cpSpaceEachBody
+_get_body_rows = _ffi.addressof(_lib, "pmSpaceBodyGetIteratorFuncBatched")   # pymunk's batch read
 COLOURS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
            "tab:olive"]
 
@@ -214,26 +233,41 @@ class BlockWorld(gymnasium.Env):
         high = np.array([5.0, top, np.pi, TABLE_X[1], top, 1.0], np.float32)
         self.observation_space = spaces.Box(np.tile(low, (self.n_blocks, 1)),
                                             np.tile(high, (self.n_blocks, 1)), dtype=np.float32)
-        # Bodies and shapes are made once and moved into a fresh Space at every step (cheaper than
-        # new objects; a fresh Space has no cached contacts, so results depend on the state only).
+        # Bodies, shapes and the Space are made once; _load resets at every step what the Space
+        # remembers of earlier steps, so that results depend on the state only.
         self._table = pymunk.Body(body_type=pymunk.Body.STATIC)
         (left, right), bottom = TABLE_X, FLOOR_Y - 0.1
-        top = pymunk.Poly(self._table, [(left, -0.05), (right, -0.05), (right, 0), (left, 0)])  # 5 cm thick
+        # the table top is 5 cm thick: thin segments let blocks tunnel
+        top = pymunk.Poly(self._table, [(left, -0.05), (right, -0.05), (right, 0), (left, 0)])
         floor = pymunk.Poly(self._table, [(-5, bottom), (5, bottom), (5, FLOOR_Y), (-5, FLOOR_Y)])
         self._bodies = [pymunk.Body(MASS, pymunk.moment_for_box(MASS, (BLOCK_W, BLOCK_H)))
                         for _ in range(self.n_blocks)]
-        shapes = [top, floor] + [pymunk.Poly.create_box(b, (BLOCK_W, BLOCK_H)) for b in self._bodies]
+        boxes = [pymunk.Poly.create_box(b, (BLOCK_W, BLOCK_H)) for b in self._bodies]
+        shapes = [top, floor] + boxes
         for shape in shapes:
             shape.friction, shape.elasticity = FRICTION, 0.0
-        self._everything = [self._table, *self._bodies, *shapes]
-        self._space, self._buffer = pymunk.Space(), pymunk.batch.Buffer()   # the buffer: for reading
-        self._space.add(*self._everything)           # the bodies always live in self._space
+        self._everything, self._blocks = [self._table, *self._bodies, *shapes], shapes[2:]
+        self._space = self._new_space()
         # For setting them: a buffer wrapping self._rows (n + 1, 6), the last row the table's.
         # It is never read into (a read could reallocate numpy's memory).
         self._rows, self._setter = np.zeros((self.n_blocks + 1, 6)), pymunk.batch.Buffer()
         self._setter.set_float_buf(self._rows)
         self._fields = (pymunk.batch.BodyFields.POSITION | pymunk.batch.BodyFields.ANGLE
-                        | pymunk.batch.BodyFields.VELOCITY | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
+                        | pymunk.batch.BodyFields.VELOCITY
+                        | pymunk.batch.BodyFields.ANGULAR_VELOCITY)
+        # For reading them: pymunk appends the rows to a C array that it grows as needed. After a
+        # first read has grown it, every read refills the same memory, which self._now views
+        # (n, 6): a read in _settle is then one C call (a fifth of pymunk.batch.get_space_bodies
+        # and a numpy copy), its arguments made here once.
+        self._buffer = pymunk.batch.Buffer()
+        pymunk.batch.get_space_bodies(self._space, self._fields, self._buffer)
+        self._now = np.frombuffer(self._buffer.float_buf(), np.float64)[: 6 * self.n_blocks]
+        self._now = self._now.reshape(self.n_blocks, 6)
+        self._rows_read = self._buffer._float_arr           # its .num: how many floats were read
+        self._now_address = self._rows_read.arr
+        self._batch = _ffi.new("pmBatchedData *", {"fields": self._fields.value,
+                                                   "floatArray": self._rows_read,
+                                                   "intArray": self._buffer._int_arr})
         self._state, self._goals = np.zeros((self.n_blocks, 6)), {}
         self._steps, self._stable, self._started = 0, True, False
 
@@ -325,7 +359,8 @@ class BlockWorld(gymnasium.Env):
             state = np.zeros((self.n_blocks, 6))
             state[:, 0], state[:, 1] = self._scatter(goals), BLOCK_H / 2
         self._state, self._goals, self._steps, self._started = state, goals, 0, True
-        speeds = np.abs(state[:, 3:]) @ REST_CRITERIA[3:, 1:]           # (|vx| + |vy|) / REST_V, |w| / REST_W
+        # (|vx| + |vy|) / REST_V and |w| / REST_W: a state given at rest counts as stable
+        speeds = np.abs(state[:, 3:]) @ REST_CRITERIA[3:, 1:]
         self._stable = bool(speeds.max() < 1.0)
         return observation(self._state, self._goals), {"success": is_success(state, goals)}
 
@@ -349,7 +384,8 @@ class BlockWorld(gymnasium.Env):
             self._load(start)
             substeps, self._stable, self._state = self._settle(start)
             angle = self._state[:, 2]          # keep it in [-pi, pi] (a tumbled block may pass pi)
-            self._state[:, 2] = np.where(np.abs(angle) > np.pi, (angle + np.pi) % (2 * np.pi) - np.pi, angle)
+            wrapped = (angle + np.pi) % (2 * np.pi) - np.pi
+            self._state[:, 2] = np.where(np.abs(angle) > np.pi, wrapped, angle)
         self._steps += 1
         success = is_success(self._state, self._goals) and self._stable
         truncated = self._steps >= self.max_steps and not success
@@ -402,52 +438,84 @@ class BlockWorld(gymnasium.Env):
 
     # -- physics --------------------------------------------------------------------------------
 
-    def _load(self, state):
-        """Move the table and the blocks, posed as in state (n, 6), into a fresh pymunk Space.
+    def _new_space(self):
+        """A fresh Space holding the table and the blocks; _load keeps it as good as fresh."""
+        space = pymunk.Space()
+        space.gravity, space.collision_slop, space.collision_bias = (0.0, GRAVITY), SLOP, BIAS
+        space.add(*self._everything)       # ids: table top 0, floor 1, blocks 2, 3, ... in order
+        self._loads = 0                    # see _load
+        return space
 
-        Only the state may carry over from the last step: the bodies' bias velocities (chipmunk's
-        penetration correction) are zeroed by an update with dt = 0, and the poses are set before
-        the shapes enter the new space, whose spatial index is then built from them alone.
+    def _load(self, state):
+        """Pose the blocks as in state (n, 6) in a Space that is, for chipmunk, as good as fresh.
+
+        What a chipmunk space remembers from one substep to the next, beyond the bodies: the
+        contacts with their impulses (warm starting), the tree of shapes with its cached pairs, the
+        shape ids, and the last time step. Taking the blocks' shapes out deletes every contact and
+        pair (each involves a block: static shapes never collide) and empties the tree; putting them
+        back in the same order with the same ids, after the last step is reset to 0, rebuilds the
+        same tree a fresh space would: a step gives, bit for bit, what it gives in a fresh space
+        (checked side by side on 100,000 actions), for 4 us where building a new Space took 30.
+        The bodies' bias velocities (penetration correction) are zeroed by an update with dt = 0.
+        The tree orders its pairs by 32-bit stamps that grow by one per substep and per insert,
+        which would wrap after 2**32: a new Space every million loads (each <= 1208 stamps).
         """
+        if self._loads == 10**6:
+            self._space.remove(*self._everything)
+            self._space = self._new_space()
+        self._loads += 1
+        space = self._space._space
+        for shape in self._blocks:
+            _remove_shape(space, shape._shape)
         for body in self._bodies:
             _update_position(body._body, 0.0)
         # all bodies in one call: dynamic ones in insertion order, then the table at (0, 0, 0)
         self._rows[:-1] = state
         pymunk.batch.set_space_bodies(self._space, self._fields, self._setter)
-        self._space.remove(*self._everything)
-        self._space = space = pymunk.Space()
-        space.gravity, space.collision_slop, space.collision_bias = (0.0, GRAVITY), SLOP, BIAS
-        space.add(*self._everything)
+        _set_shape_id_counter(space, 2)
+        _set_current_time_step(space, 0.0)
+        for shape in self._blocks:
+            _add_shape(space, shape._shape)
 
     def _read(self):
-        """All blocks at once (n, 6): x, y, angle, vx, vy, w (dynamic bodies come in insertion order)."""
-        self._buffer.clear()
-        pymunk.batch.get_space_bodies(self._space, self._fields, self._buffer)
-        return np.frombuffer(self._buffer.float_buf(), np.float64)[: 6 * self.n_blocks].reshape(-1, 6).copy()
+        """All blocks at once (n, 6): x, y, angle, vx, vy, w (dynamic bodies in insertion order)."""
+        self._refresh()
+        return self._now.copy()
+
+    def _refresh(self):
+        """Read all bodies into self._now (see __init__)."""
+        self._rows_read.num = 0
+        _each_body(self._space._space, _get_body_rows, self._batch)
+        if self._rows_read.arr != self._now_address:   # pymunk moved its array: never for a
+            raise RuntimeError("pymunk reallocated the read buffer")      # read of the same size
 
     def _settle(self, start):
         """Step until rest or MAX_SUBSTEPS. Returns (substeps, at rest, final state (n, 6)).
 
         Bodies are read every CHECK_EVERY substeps. A read is quiet when, for every block,
-            (|dx| + |dy| + HALF_DIAG |dangle|) / REST_MOVE < 1   (no point moved REST_MOVE since the anchor)
+            (|dx| + |dy| + HALF_DIAG |dangle|) / REST_MOVE < 1   (no point moved REST_MOVE since
+                                                                  the anchor)
             (|vx| + |vy|) / REST_V < 1  and  |w| / REST_W < 1
-        (L1 norms: a little stricter than the euclidean ones), where the anchor is the last read that
-        was not quiet. Rest = quiet reads for REST_SUBSTEPS substeps after the anchor.
+        (L1 norms: a little stricter than the euclidean ones), where the anchor is the last read
+        that was not quiet. Rest = quiet reads for REST_SUBSTEPS substeps after the anchor.
+        A read and its test cost about a substep: hence the in-place read, ndarray.dot (a third
+        of the cost of the @ operator for so small arrays, the same numbers) and Python's max
+        over a list (half the cost of numpy's max for 3 n numbers).
         """
+        space, now = self._space._space, self._now
         anchor, quiet = start.copy(), 0      # start (n, 6): the state just loaded
         anchor[:, 3:] = 0.0                  # so |now - anchor| holds pose changes and speeds
         for k in range(CHECK_EVERY, MAX_SUBSTEPS + 1, CHECK_EVERY):
             for _ in range(CHECK_EVERY):
-                _space_step(self._space._space, DT)
-            now = self._read()
-            if (np.abs(now - anchor) @ REST_CRITERIA).max() >= 1.0:
-                anchor, quiet = now.copy(), 0
-                anchor[:, 3:] = 0.0
+                _space_step(space, DT)
+            self._refresh()
+            if max(np.abs(now - anchor).dot(REST_CRITERIA).ravel().tolist()) >= 1.0:
+                anchor[:, :3], quiet = now[:, :3], 0
             else:
                 quiet += CHECK_EVERY
                 if quiet >= REST_SUBSTEPS:
-                    return k, True, now
-        return MAX_SUBSTEPS, False, now
+                    return k, True, now.copy()
+        return MAX_SUBSTEPS, False, now.copy()
 
 
 def _free_segments(goal_xs):
@@ -475,7 +543,8 @@ def stack_tower(env):
 
 def adversarial_action(state, integers, choice):
     """An action (block, x-bin, layer) aimed where physics is most likely to break, given the
-    current state (n, 6). integers(lo, hi) draws an int in [lo, hi]; choice(seq) draws an element of seq."""
+    current state (n, 6). integers(lo, hi) draws an int in [lo, hi]; choice(seq) draws an element
+    of seq."""
     n = len(state)
     b = integers(0, n - 1)
     kind = choice(["uniform", "into", "onto", "air", "edge"])

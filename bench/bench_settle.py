@@ -5,9 +5,9 @@ actions, to show that env2d.MAX_SUBSTEPS is not cut short.
 
 Episodes as in the property test tests/test_env2d.py::test_physics_never_breaks, with the same
 env2d.stack_tower and env2d.adversarial_action: 2 to 8 blocks, half of them starting from a tower as
-tall as it gets, then 1 to 40 actions, each aimed uniformly, at the table's edge, far in the air,
-into another block or onto it. Prints percentiles and the maximum of the substeps to rest (60 a
-second) and how many actions hit the cap. About a minute per 6000 episodes.
+tall as it gets, then 1 to 40 actions, each aimed uniformly, at the table's edge, far in the
+air, into another block or onto it. Prints the mean, percentiles and the maximum of the substeps to
+rest (60 a second) and how many actions hit the cap. About 25 s per 6000 episodes.
 """
 
 
@@ -39,8 +39,9 @@ def main():
                 substeps.append(info["settle_steps"])
     s = np.array(substeps)
     pct = np.percentile(s, [50, 90, 99, 99.9])
-    print(f"{len(s)} actions; substeps to rest: median {pct[0]:.0f}, 90% {pct[1]:.0f}, "
-          f"99% {pct[2]:.0f}, 99.9% {pct[3]:.0f}, max {s.max()} ({s.max() * env2d.DT:.1f} s); "
+    print(f"{len(s)} actions; substeps to rest: mean {s.mean():.2f}, median {pct[0]:.0f}, "
+          f"90% {pct[1]:.0f}, 99% {pct[2]:.0f}, 99.9% {pct[3]:.0f}, "
+          f"max {s.max()} ({s.max() * env2d.DT:.1f} s); "
           f"{(s >= env2d.MAX_SUBSTEPS).sum()} at the cap of {env2d.MAX_SUBSTEPS}")
 
 
