@@ -324,6 +324,11 @@ class BlockWorld(gymnasium.Env):
                 raise ValueError(f"goal {xy!r} of block {b}: y above {top:.3f} m, higher than "
                                  f"{self.n_blocks} blocks stacked on end can reach")
             checked[int(b)] = (float(x), float(y))
+        pair = same_spot(checked)
+        if pair:
+            raise ValueError(f"goals {goals!r}: blocks {pair[0]} and {pair[1]} have goals less "
+                             f"than {SAME_SPOT * 100:.0f} cm apart, which two blocks can never "
+                             "both meet")
         return checked
 
     # -- Gymnasium API --------------------------------------------------------------------------

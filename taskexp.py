@@ -27,7 +27,7 @@ from tqdm import tqdm
 import agent as agent_lib
 from agent import Agent
 from config import Config  # noqa: F401  (re-exported: taskexp.Config, the settings of a run)
-from env2d import BLOCK_W, N_X, BlockWorld, is_success, layer, observation
+from env2d import BLOCK_W, N_X, SAME_SPOT, BlockWorld, is_success, layer, observation
 from report import task_stats
 from rollout import Trajectory, run_episodes, success_rate
 
@@ -193,28 +193,34 @@ def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print
 # sec 4.2: task expansion
 # --------------------------------------------------------------------------------------------
 
-def random_position(env, rng):
-    """A goal position drawn uniformly over the action grid: any x-bin, any layer."""
-    ix, k = int(rng.integers(len(env.x_bins))), int(rng.integers(len(env.y_bins)))
-    return float(env.x_bins[ix]), float(env.y_bins[k])
+def random_position(env, rng, others=()):
+    """A goal position drawn uniformly over the action grid (any x-bin, any layer) among those
+    that are not the same spot as one of the positions `others` (env2d.same_spot: no two blocks
+    can meet both)."""
+    while True:
+        ix, k = int(rng.integers(len(env.x_bins))), int(rng.integers(len(env.y_bins)))
+        x, y = float(env.x_bins[ix]), float(env.y_bins[k])
+        if all(np.hypot(x - ox, y - oy) >= SAME_SPOT for ox, oy in others):
+            return x, y
 
 
 def alter(goals, env, rng, restrict=True, p_add=0.5):
     """One candidate task: exactly one alteration of `goals` (sec 4.2).
 
     With probability p_add add a goal for a block that has none, else modify the target of a
-    block that has one; block and position uniform. Without the restriction ("w/o restriction",
-    Table 3) the candidate is an unrelated random task: uniform goal count, blocks and positions.
+    block that has one; block uniform, position uniform over the spots no other goal names.
+    Without the restriction ("w/o restriction", Table 3) the candidate is an unrelated random
+    task: uniform goal count, blocks and positions.
     """
     if not restrict:
-        m = int(rng.integers(1, env.n_blocks + 1))
-        return {int(b): random_position(env, rng) for b in rng.permutation(env.n_blocks)[:m]}
+        new = {}
+        for b in rng.permutation(env.n_blocks)[: int(rng.integers(1, env.n_blocks + 1))]:
+            new[int(b)] = random_position(env, rng, new.values())
+        return new
     new = dict(goals)
     free = [b for b in range(env.n_blocks) if b not in goals]
-    if free and rng.random() < p_add:
-        new[int(rng.choice(free))] = random_position(env, rng)         # add one goal
-    else:
-        new[int(rng.choice(list(goals)))] = random_position(env, rng)  # modify one goal
+    b = int(rng.choice(free)) if free and rng.random() < p_add else int(rng.choice(list(goals)))
+    new[b] = random_position(env, rng, [xy for other, xy in goals.items() if other != b])
     return new
 
 

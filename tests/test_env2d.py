@@ -244,6 +244,7 @@ def test_encode_decode_round_trip(env):
     (lambda e: BlockWorld(6, max_steps=2.5), "max_steps=2.5"),
     (lambda e: BlockWorld(6, max_steps=True), "max_steps=True"),
     (lambda e: e.reset(options={"goals": {0: (0.0, 0.8)}}), "higher than 6 blocks"),
+    (lambda e: e.reset(options={"goals": {0: (0.1, 0.025), 3: (0.105, 0.026)}}), "blocks 0 and 3"),
     (lambda e: e.reset(options={"state": np.full((6, 6), 9.0)}), "outside the world"),
 ])
 def test_bad_inputs_raise_value_error(env, call, match):

@@ -9,7 +9,7 @@ import pytest
 import cli
 import taskexp
 from agent import Agent
-from env2d import BLOCK_H, BlockWorld, is_success, layer
+from env2d import BLOCK_H, BlockWorld, is_success, layer, same_spot
 
 
 @pytest.fixture
@@ -29,6 +29,18 @@ def test_alter_makes_exactly_one_alteration_and_both_kinds(env):
         assert len(added) + len(changed) == 1, (goals, new)
         kinds.add("add" if added else "modify")
     assert kinds == {"add", "modify"}
+
+
+@pytest.mark.parametrize("restrict", [True, False])
+def test_alter_never_puts_two_goals_on_the_same_spot(env, restrict):
+    """The world refuses goals that no two blocks can meet; alter never proposes them, even when
+    a crowded task leaves few free spots."""
+    rng = np.random.default_rng(3)
+    goals = {b: (float(env.x_bins[4 * b]), float(env.y_bins[0])) for b in range(5)}
+    for _ in range(2000):
+        candidate = taskexp.alter(goals, env, rng, restrict)
+        assert same_spot(candidate) is None, candidate
+        env.reset(options={"goals": candidate})                   # and the world accepts it
 
 
 def test_alter_without_restriction_draws_unrelated_tasks(env):
