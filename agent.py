@@ -6,8 +6,10 @@ Sec 3: a goal-conditioned policy pi(a | s, g) and value V(s, g) over a set of bl
 picks a block and a discrete target (x-bin, layer) for it.  Sec 4.1/4.3: behaviour cloning on
 demonstrations (base skills, self-distillation); PPO fine-tuning with a sparse success reward.
 
-Everything is float64 numpy with no autograd: each forward caches what its backward needs, and
-every backward is checked against central finite differences in tests/test_agent.py.
+Numpy with no autograd: each forward caches what its backward needs, and every backward is checked
+against central finite differences in tests/test_agent.py.  The networks compute in the dtype they
+are made with: float64 for those checks, float32 for training (taskexp.Config.dtype; twice as fast,
+and the same learning); losses, log-probs and returns are always float64.
 Randomness only through a passed np.random.Generator (or an integer seed for initialisation).
 """
 import json
@@ -52,17 +54,19 @@ class MLP:
     W_k ~ N(0, 1/fan_in) keeps pre-activations O(1); the last layer is scaled by out_scale
     (0.01 for policy logits: a near-uniform initial policy explores every block and bin).
     backward_fn(params, hs, dout) -> (grads, dx) is the backward pass (default mlp_backward).
+    The parameters are drawn in float64 and stored in `dtype`, so a float32 network starts from
+    the same weights, rounded.
     """
 
-    def __init__(self, sizes, seed=0, out_scale=1.0, backward_fn=mlp_backward):
+    def __init__(self, sizes, seed=0, out_scale=1.0, backward_fn=mlp_backward, dtype=np.float64):
         rng = np.random.default_rng(seed)
         self.sizes, self.n_layers, self.params = list(sizes), len(sizes) - 1, {}
         self.backward_fn = backward_fn
         for k, (fan_in, fan_out) in enumerate(zip(sizes[:-1], sizes[1:])):
             scale = out_scale if k == self.n_layers - 1 else 1.0
             W = rng.standard_normal((fan_in, fan_out))
-            self.params[f"W{k}"] = W * (scale / np.sqrt(fan_in))
-            self.params[f"b{k}"] = np.zeros(fan_out)
+            self.params[f"W{k}"] = (W * (scale / np.sqrt(fan_in))).astype(dtype, copy=False)
+            self.params[f"b{k}"] = np.zeros(fan_out, dtype)
 
     def forward(self, x):
         """x (B, in) -> (B, out).  Caches every layer's output for backward."""
@@ -207,16 +211,19 @@ class SetNet:
     rho = MLP([3H, H, out]).  `params` holds the MLPs' own arrays under prefixed keys.
     """
 
-    def __init__(self, n_features, hidden, out, seed=0, out_scale=1.0, mlp_backward=mlp_backward):
+    def __init__(self, n_features, hidden, out, seed=0, out_scale=1.0, mlp_backward=mlp_backward,
+                 dtype=np.float64):
+        self.dtype = np.dtype(dtype)
         self.phi = MLP([n_features, hidden, hidden], seed=[*np.atleast_1d(seed), 0],
-                       backward_fn=mlp_backward)
+                       backward_fn=mlp_backward, dtype=dtype)
         self.rho = MLP([3 * hidden, hidden, out], seed=[*np.atleast_1d(seed), 1],
-                       out_scale=out_scale, backward_fn=mlp_backward)
+                       out_scale=out_scale, backward_fn=mlp_backward, dtype=dtype)
         self.params = {f"{name}.{k}": p for name in ("phi", "rho")
                        for k, p in getattr(self, name).params.items()}
 
     def forward(self, f):
-        """f (B, n, F) -> o (B, n, out)."""
+        """f (B, n, F) -> o (B, n, out), in the network's dtype."""
+        f = f.astype(self.dtype, copy=False)
         B, n, F = f.shape
         e = self.phi.forward(f.reshape(B * n, F)).reshape(B, n, -1)
         self.argmax = e.argmax(axis=1)                                         # (B, H)
@@ -226,6 +233,7 @@ class SetNet:
 
     def backward(self, dout):
         """dout (B, n, out) -> grads {"phi.W0": ..., "rho.b1": ...} for the last forward."""
+        dout = dout.astype(self.dtype, copy=False)          # float64 losses, float32 network
         B, n, _ = dout.shape
         g_rho = self.rho.backward(dout.reshape(B * n, -1))
         dz = self.rho.dx.reshape(B, n, -1)
@@ -263,6 +271,7 @@ class ActionDist:
     """
 
     def __init__(self, out, n_x):
+        out = np.asarray(out, dtype=np.float64)          # probabilities in float64 whatever the net
         self.shape = out.shape
         self.lb = log_softmax(out[..., 0])                     # (B, n)
         self.lx = log_softmax(out[..., 1:1 + n_x])             # (B, n, n_x)
@@ -386,22 +395,27 @@ class Agent:
     library's by default, or a student's (exercise 7 trains with it).
     """
 
-    def __init__(self, n_blocks=6, n_x=37, n_y=None, hidden=128, seed=0, mlp_backward=mlp_backward):
+    def __init__(self, n_blocks=6, n_x=37, n_y=None, hidden=128, seed=0, mlp_backward=mlp_backward,
+                 dtype="float64"):
         self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
         self.n_y = self.n_blocks if n_y is None else int(n_y)
+        self.dtype = np.dtype(dtype)
+        if self.dtype not in (np.float32, np.float64):
+            raise ValueError(f"dtype {dtype!r}: the networks compute in float32 or float64")
         F = featurize(np.zeros((1, self.n_blocks, 6)), self.n_y).shape[-1]
         self.actor = SetNet(F, hidden, 1 + self.n_x + self.n_y, seed=[seed, 0], out_scale=0.01,
-                            mlp_backward=mlp_backward)
-        self.critic = SetNet(F, hidden, 1, seed=[seed, 1], mlp_backward=mlp_backward)
+                            mlp_backward=mlp_backward, dtype=self.dtype)
+        self.critic = SetNet(F, hidden, 1, seed=[seed, 1], mlp_backward=mlp_backward,
+                             dtype=self.dtype)
         self.actor_opt, self.critic_opt = Adam(self.actor.params), Adam(self.critic.params)
         self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
 
     def features(self, obs):
-        """obs (B, n, 6) -> (B, n, F); checks the number of blocks."""
+        """obs (B, n, 6) -> (B, n, F) in the networks' dtype; checks the number of blocks."""
         obs = np.asarray(obs, dtype=np.float64)
         if obs.ndim != 3 or obs.shape[1:] != (self.n_blocks, 6):
             raise ValueError(f"obs must have shape (B, {self.n_blocks}, 6), got {obs.shape}")
-        return featurize(obs, self.n_y)
+        return featurize(obs, self.n_y).astype(self.dtype, copy=False)
 
     def _batched(self, obs):
         obs = np.asarray(obs, dtype=np.float64)
@@ -492,14 +506,15 @@ class Agent:
         adv = np.asarray(adv, dtype=np.float64)
         check_finite("PPO update: inputs", logp_old=logp_old, advantages=adv, returns=returns)
         adv = (adv - adv.mean()) / (adv.std() + 1e-8)
-        v_before = self.value(obs)
+        features = self.features(obs)               # once: they do not change within the update
+        v_before = self.critic.forward(features)[..., 0].mean(-1)
         var_r = np.var(returns)
         ev = float(1.0 - np.var(returns - v_before) / var_r) if var_r > 0 else float("nan")
         self.actor_opt.lr = self.critic_opt.lr = lr
         stats = []
         for e in range(epochs):
             for i, idx in enumerate(_minibatches(len(obs), minibatch, rng)):
-                f = self.features(obs[idx])
+                f = features[idx]
                 pl, dout, info = ppo_loss(self.actor.forward(f), actions[idx], logp_old[idx],
                                           adv[idx], self.n_x, clip, ent_coef)
                 g_actor, norm_actor = clip_grad_norm(self.actor.backward(dout), max_grad_norm)
@@ -561,12 +576,14 @@ class Agent:
     def save(self, path, extra=None):
         """Write the parameters plus a header and any `extra` arrays as a plain .npz (save_npz).
         The header is what load needs to rebuild the agent: "format_version", "sizes" (n_blocks,
-        n_x, n_y, hidden) and "geometry", the world's env2d.GEOMETRY that the features assume."""
+        n_x, n_y, hidden), "dtype" (the networks' float32 or float64) and "geometry", the
+        world's env2d.GEOMETRY that the features assume."""
         save_npz(path, {**self.header(), **self.state_dict(), **(extra or {})})
 
     def header(self):
         return {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
                 "sizes": np.array([self.n_blocks, self.n_x, self.n_y, self.hidden], dtype=np.int64),
+                "dtype": np.array(self.dtype.name),
                 "geometry": np.array(list(GEOMETRY.values()), dtype=np.float64)}
 
     @classmethod
@@ -593,7 +610,10 @@ class Agent:
             raise ValueError(f"{path}: made for a world of other geometry than env2d's "
                              f"(saved, now): {diff}")
         n_blocks, n_x, n_y, hidden = (int(k) for k in sizes)
-        agent = cls(n_blocks, n_x, n_y, hidden)
+        dtype = str(data.get("dtype", ""))
+        if dtype not in ("float32", "float64"):
+            raise ValueError(f"{path}: dtype {dtype!r}, expected float32 or float64")
+        agent = cls(n_blocks, n_x, n_y, hidden, dtype=dtype)
         params, extra = agent.state_dict(), set(extra)
         missing = extra - set(data)
         if missing:
@@ -604,9 +624,9 @@ class Agent:
                              f"{sorted(set(params) ^ stored)}")
         for k, p in params.items():
             have = data[k]
-            if have.shape != p.shape or have.dtype.kind != "f" or not np.isfinite(have).all():
+            if have.shape != p.shape or have.dtype != p.dtype or not np.isfinite(have).all():
                 raise ValueError(f"{path}: {k} is {data[k].dtype} {data[k].shape}, expected finite "
-                                 f"float {p.shape} for sizes {sizes.tolist()}")
+                                 f"{p.dtype} {p.shape} for sizes {sizes.tolist()}")
             p[...] = data[k]                      # in place: the networks and Adam share p
         return (agent, {k: data[k] for k in extra}) if extra else agent
 

@@ -18,6 +18,7 @@ import time
 import zipfile
 from dataclasses import asdict, fields
 from functools import partial
+from typing import NamedTuple
 
 import numpy as np
 from tqdm import tqdm
@@ -33,7 +34,7 @@ from taskexp import SHAPES, Config, RunState
 # --------------------------------------------------------------------------------------------
 
 CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",),
-           "shapes": tuple(SHAPES)}
+           "shapes": tuple(SHAPES), "dtype": ("float32", "float64")}
 MIN_ZERO = {"seed", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add"}
 AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
 SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes")
@@ -76,6 +77,9 @@ def parser():
     p.add_argument("--scale", type=float, default=None,
                    help="multiply every data and step budget (0.05: a smoke test whose "
                         "numbers mean nothing; default 1)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="processes that run the physics (default: the cores this machine lets the "
+                        "run use); the results are the same for any number")
     p.add_argument("--resume", action="store_true",
                    help="go on from the last complete round of the run in --out, with its settings "
                         "(--rounds may raise the number of rounds)")
@@ -124,10 +128,29 @@ def saved_results(out):
     return None, " and ".join(why)
 
 
+class Invocation(NamedTuple):
+    """What the command line asks for."""
+    cfg: Config             # the run's settings (saved ones when resuming)
+    out: str                # its directory
+    resume: bool            # go on with the run in `out`
+    scale: float            # the factor --scale applied to the budgets (1: none)
+    workers: int            # processes for the physics; the results do not depend on it
+
+
+def usable_cores():
+    try:
+        return len(os.sched_getaffinity(0))            # the cores this process may run on
+    except AttributeError:                             # macOS, Windows
+        return os.cpu_count() or 1
+
+
 def parse_args(argv=None):
-    """-> (Config, output directory, resume?, scale). Bad settings: a one-line reason, exit 2."""
+    """-> Invocation. Bad settings: a one-line reason, exit 2."""
     p = parser()
     a = p.parse_args(argv)
+    if a.workers is not None and a.workers < 1:
+        p.error(f"--workers must be >= 1, got {a.workers}")
+    workers = usable_cores() if a.workers is None else a.workers
     given = {f.name: getattr(a, f.name) for f in fields(Config) if getattr(a, f.name) is not None}
     if "shapes" in given:
         given["shapes"] = tuple(given["shapes"])
@@ -151,7 +174,7 @@ def parse_args(argv=None):
                     "pass a larger --rounds to extend it")
         if problem(cfg):
             p.error(problem(cfg))
-        return cfg, a.out, True, 1.0
+        return Invocation(cfg, a.out, True, 1.0, workers)
     cfg = Config(**given)
     if problem(cfg):
         p.error(problem(cfg))
@@ -172,7 +195,7 @@ def parse_args(argv=None):
             p.error(f"{what} that cannot be resumed ({why}); delete its files or choose "
                     "another --out")
         p.error(f"{what}; continue it with --resume --out {out}, or choose another --out")
-    return cfg, out, False, scale
+    return Invocation(cfg, out, False, scale, workers)
 
 
 # --------------------------------------------------------------------------------------------
@@ -223,7 +246,7 @@ def save_state(path, agent, run, rng):
 def load_state(path, cfg, rng):
     """Read what save_state wrote for a run with settings cfg; restore rng -> (agent, RunState).
     ValueError naming the file when it is unreadable or from other settings."""
-    template = Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden)
+    template = Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, dtype=cfg.dtype)
     saved, data = Agent.load(path, extra=STATE_KEYS + tuple(template.training_state()))
     if int(data["state_version"]) != STATE_VERSION:
         raise ValueError(f"{path}: state_version {data['state_version']}, expected {STATE_VERSION}")
@@ -274,7 +297,7 @@ def peak_memory_mb():
 terminal_bar = partial(tqdm, leave=False, disable=None, dynamic_ncols=True)
 
 
-def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar):
+def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar, workers=1):
     """taskexp.train with a checkpoint after every round; returns the results dict.
 
     After round k: round{k}.npz, state.npz and results.json. resume=True goes on from the last
@@ -310,7 +333,8 @@ def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar):
             + f"  ({clock['total_s']:.0f}s so far, peak memory {clock['peak_memory_mb']} MB)")
         t_round[0] = time.time()
 
-    return taskexp.train(cfg, agent, state, rng, on_round=checkpoint, bar=bar, log=log).results
+    return taskexp.train(cfg, agent, state, rng, on_round=checkpoint, bar=bar, log=log,
+                         workers=workers).results
 
 
 def saved_round(out):
@@ -329,13 +353,13 @@ def how_to_go_on(out):
 
 
 def main(argv=None):
-    cfg, out, resume, scale = parse_args(argv)
+    cfg, out, resume, scale, workers = parse_args(argv)
     note = (f"note: --scale {scale:g} shrinks every budget: this run tests the code, and its "
             "success rates say nothing about the method")
     if scale != 1.0:
         print(note)
     try:
-        results = run(cfg, out, resume=resume)
+        results = run(cfg, out, resume=resume, workers=workers)
         print()
         print(report.tables(results))
         for path in report.figures(results, out):

@@ -22,6 +22,9 @@ class Config:
     """action budget of the verification run from s_T (sec 4.2) and of the stretch tasks"""
     hidden: int = 128
     """width of the actor's and the critic's per-block networks"""
+    dtype: str = "float32"
+    """the networks' arithmetic, float32 | float64: float32 is twice as fast and learns the same
+    (the finite-difference tests use float64)"""
     n_envs: int = 32
     """environments stepped in lockstep, one batched policy call per step"""
 

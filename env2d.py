@@ -378,19 +378,35 @@ class BlockWorld(gymnasium.Env):
         """
         if not self._started:
             raise gymnasium.error.ResetNeeded("call reset() before step(): there is no scene yet")
+        return self.finish_step(self.simulate(self._state, action))
+
+    def simulate(self, state, action):
+        """The physics of one action from `state` (n, 6): teleport, then settle.
+
+        -> (state after, noop, stable, substeps); stable is None after a no-op. A pure function
+        of (state, action), bit for bit, whichever world runs it: so worker processes can run it
+        for the worlds of the main process (rollout.PhysicsPool), which then finish_step.
+        """
         b, ix, iy = self._check_action(action)
         pose = (self.x_bins[ix], self.y_bins[iy] + DROP_GAP)
-        others = self._state[np.arange(self.n_blocks) != b, :3]
-        noop = bool((overlap_depth(pose, others) > OVERLAP_TOL).any())
-        substeps = 0
+        others = state[np.arange(self.n_blocks) != b, :3]
+        if (overlap_depth(pose, others) > OVERLAP_TOL).any():
+            return state, True, None, 0
+        start = state.copy()
+        start[b] = (*pose, 0.0, 0.0, 0.0, 0.0)
+        self._load(start)
+        substeps, stable, after = self._settle(start)
+        angle = after[:, 2]                    # keep it in [-pi, pi] (a tumbled block may pass pi)
+        wrapped = (angle + np.pi) % (2 * np.pi) - np.pi
+        after[:, 2] = np.where(np.abs(angle) > np.pi, wrapped, angle)
+        return after, False, stable, substeps
+
+    def finish_step(self, outcome):
+        """The rest of step() once simulate() has run: count the step, judge success and
+        truncation. outcome: what simulate returned for this world's state."""
+        after, noop, stable, substeps = outcome
         if not noop:
-            start = self._state.copy()
-            start[b] = (*pose, 0.0, 0.0, 0.0, 0.0)
-            self._load(start)
-            substeps, self._stable, self._state = self._settle(start)
-            angle = self._state[:, 2]          # keep it in [-pi, pi] (a tumbled block may pass pi)
-            wrapped = (angle + np.pi) % (2 * np.pi) - np.pi
-            self._state[:, 2] = np.where(np.abs(angle) > np.pi, wrapped, angle)
+            self._state, self._stable = after, stable
         self._steps += 1
         success = is_success(self._state, self._goals) and self._stable
         truncated = self._steps >= self.max_steps and not success

@@ -1,10 +1,73 @@
 """rollout.py -- episodes of the goal-conditioned policy in the block world (sec 3): a batch of
-tasks run over several environments at once, with one batched policy call per step."""
+tasks run over several worlds at once, with one batched policy call per step, and the physics of
+those worlds in worker processes when there is more than one core.
+
+Results do not depend on the number of workers: a step is a pure function of (state, action)
+(env2d.BlockWorld.simulate), and every random draw happens in the main process.
+"""
+import multiprocessing
+import signal
+from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
 
-from env2d import observation
+from env2d import BlockWorld, observation
+
+_WORLD = None                  # a worker's own BlockWorld, which simulates for the main process
+
+
+def _start_worker(n_blocks):
+    global _WORLD
+    signal.signal(signal.SIGINT, signal.SIG_IGN)    # Ctrl-C is the main process's to handle
+    _WORLD = BlockWorld(n_blocks)
+
+
+def _simulate(job):
+    return _WORLD.simulate(*job)
+
+
+class PhysicsPool:
+    """Worker processes that run BlockWorld.simulate for the worlds of the main process.
+
+    Started with "spawn", which works the same on Linux, macOS and Windows and from a notebook.
+    A worker whose main process dies (even by SIGKILL) finds its pipe closed and exits.
+    """
+
+    def __init__(self, workers, n_blocks):
+        self.workers = workers
+        context = multiprocessing.get_context("spawn")
+        self._pool = context.Pool(workers, initializer=_start_worker, initargs=(n_blocks,))
+
+    def simulate(self, states, actions):
+        """[(state after, noop, stable, substeps)] for each (state, action), in order."""
+        jobs = list(zip(states, actions))
+        chunk = -(-len(jobs) // self.workers)        # one message per worker and step
+        return self._pool.map(_simulate, jobs, chunksize=chunk)
+
+    def close(self):
+        self._pool.terminate()
+        self._pool.join()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def physics_pool(workers, n_blocks):
+    """A PhysicsPool for workers > 1; with one, the main process steps the worlds itself."""
+    return PhysicsPool(workers, n_blocks) if workers > 1 else nullcontext()
+
+
+class Worlds(list):
+    """BlockWorlds that run_episodes steps together: a list, and the PhysicsPool (or None) that
+    runs their physics."""
+
+    def __init__(self, n, n_blocks, max_steps, pool=None):
+        super().__init__(BlockWorld(n_blocks, max_steps=max_steps) for _ in range(n))
+        self.pool = pool
 
 
 @dataclass
@@ -26,7 +89,8 @@ class Trajectory:
 def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None):
     """Run one episode per task, len(envs) at a time with one batched policy call per step.
 
-    tasks: list of (state (n, 6), goals). Returns a list of Trajectory in the order of `tasks`.
+    tasks: list of (state (n, 6), goals); envs: a list of BlockWorlds, or Worlds whose pool
+    runs the physics. Returns a list of Trajectory in the order of `tasks`.
     bar: a progress bar (tqdm) to advance by one per finished episode.
     """
     out = [None] * len(tasks)
@@ -54,9 +118,14 @@ def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None):
             actions, logp, values = agent.act(obs, deterministic=True), no_stats, no_stats
         else:
             actions, logp, values = agent.sample(obs, rng)
+        pool = getattr(envs, "pool", None)
+        if pool is None:
+            outcomes = [envs[k].simulate(envs[k].get_state(), a) for k, a in zip(active, actions)]
+        else:
+            outcomes = pool.simulate([envs[k].get_state() for k in active], actions)
         for j, k in enumerate(active):
             s = slots[k]
-            s["obs"], reward, terminated, truncated, _ = envs[k].step(actions[j])
+            s["obs"], reward, terminated, truncated, _ = envs[k].finish_step(outcomes[j])
             s["states"].append(envs[k].get_state())
             s["actions"].append(actions[j])
             s["logp"].append(logp[j])

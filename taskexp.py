@@ -27,9 +27,9 @@ from tqdm import tqdm
 import agent as agent_lib
 from agent import Agent
 from config import Config  # noqa: F401  (re-exported: taskexp.Config, the settings of a run)
-from env2d import BLOCK_W, N_X, SAME_SPOT, BlockWorld, is_success, layer, observation
+from env2d import BLOCK_W, N_X, SAME_SPOT, is_success, layer, observation
 from report import task_stats
-from rollout import Trajectory, run_episodes, success_rate
+from rollout import Trajectory, Worlds, physics_pool, run_episodes, success_rate
 
 
 @contextmanager
@@ -74,10 +74,12 @@ def random_move(env, rng):
 def base_demos(cfg, env, rng, count, bar=silent):
     """Single-step demonstrations (sec 4.1): one random block teleported somewhere it can rest.
 
-    Scenes start scattered and get up to cfg.warmup random moves first, so stacks of every height
-    occur and the demos place blocks on every layer. The goal is relabelled with where the block
-    came to rest, so every demo is correct by construction; up to cfg.max_stay "stay where you
-    are" goals for other blocks make the goal count uniform in 1..max_stay + 1.
+    A scene starts scattered and takes cfg.warmup + 1 random moves, each a demo if usable: so the
+    k-th move comes after k - 1 random moves, as if warmed up by them, and stacks of every height
+    occur (warmup = 0 is the paper's: scattered scenes only). Every move serves as a warm-up move
+    and as a demo at once, which saves the physics of separate warm-up moves. The goal is where
+    the block came to rest, so every demo is correct by construction; up to cfg.max_stay "stay
+    where you are" goals for other blocks make the goal count uniform in 1..max_stay + 1.
     Returns (tasks, obs (count, n, 6), actions (count, 3)).
     """
     tasks, obs, actions = [], [], []
@@ -85,27 +87,29 @@ def base_demos(cfg, env, rng, count, bar=silent):
     with bar(total=count, desc="demos") as progress:
         while len(tasks) < count:
             env.reset(seed=int(rng.integers(2**31)))
-            for _ in range(int(rng.integers(0, cfg.warmup + 1))):      # build some random stacks
+            for _ in range(cfg.warmup + 1):
+                s0 = env.get_state()
+                if not on_table(s0, env):                    # a block fell off: a new scene
+                    break
                 move = random_move(env, rng)
-                if move is not None:
-                    env.step(move[1])
-            s0, move = env.get_state(), random_move(env, rng)
-            if move is None or not on_table(s0, env):
-                continue
-            b, a = move
-            _, _, _, _, info = env.step(a)
-            s1 = env.get_state()
-            if info["noop"] or not info["stable"] or not on_table(s1, env):
-                continue
-            if np.linalg.norm(s1[b, :2] - s0[b, :2]) < env.threshold:
-                continue                                     # nothing moved: nothing to learn
-            others = [int(i) for i in rng.permutation([i for i in range(n) if i != b])]
-            stay = others[: int(rng.integers(0, cfg.max_stay + 1))]
-            goals = {i: (float(s1[i, 0]), float(s1[i, 1])) for i in [b] + stay}
-            tasks.append((s0, goals))
-            obs.append(observation(s0, goals))
-            actions.append(a)
-            progress.update(1)
+                if move is None:
+                    continue
+                b, a = move
+                _, _, _, _, info = env.step(a)
+                s1 = env.get_state()
+                if info["noop"] or not info["stable"] or not on_table(s1, env):
+                    continue
+                if np.linalg.norm(s1[b, :2] - s0[b, :2]) < env.threshold:
+                    continue                                 # nothing moved: nothing to learn
+                others = [int(i) for i in rng.permutation([i for i in range(n) if i != b])]
+                stay = others[: int(rng.integers(0, cfg.max_stay + 1))]
+                goals = {i: (float(s1[i, 0]), float(s1[i, 1])) for i in [b] + stay}
+                tasks.append((s0, goals))
+                obs.append(observation(s0, goals))
+                actions.append(a)
+                progress.update(1)
+                if len(tasks) == count:
+                    break
     return tasks, np.stack(obs), np.stack(actions)
 
 
@@ -419,52 +423,60 @@ class Pieces:
     relabel: Callable = relabel
 
 
-def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=silent, log=print):
+def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, log=print):
+    """One round k >= 1: task expansion from the last round's tasks (sec 4.2), then
+    self-distillation on what it generated (sec 4.3). Updates `run`; returns the round's record."""
+    log(f"[round {run.last_round + 1}] task expansion from {len(run.prev_tasks)} tasks")
+    demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces, bar)
+    stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
+    unusable = info["successful"] - info["joined"] - info["relabelled"]
+    log(f"  {info['attempts']} attempts, {info['successful']} successful: {info['joined']} joined, "
+        f"{info['relabelled']} relabelled, {unusable} unusable; "
+        f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
+    record = dict(expansion=info)
+    if demos:
+        record.update(self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar, log))
+    else:
+        log("  no demonstrations generated; keeping the current policy")
+    return {**record, **stats}
+
+
+def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=silent, log=print,
+          workers=1):
     """Base skills (round 0), then cfg.rounds rounds of task expansion and self-distillation, each
     evaluated zero-shot. Returns the RunState; its results hold one record per round.
 
     To go on with a stopped run, pass its agent, RunState and Generator. on_round(k, agent, run,
-    rng), if given, is called after every round (cli.py saves checkpoints there).
+    rng), if given, is called after every round (cli.py saves checkpoints there). workers > 1
+    runs the physics in that many processes; the results are the same for any number.
     """
     pieces = pieces or Pieces()
     rng = np.random.default_rng(cfg.seed) if rng is None else rng
-    envs = [BlockWorld(cfg.n_blocks, max_steps=cfg.max_steps) for _ in range(cfg.n_envs)]
-    short_envs = [BlockWorld(cfg.n_blocks, max_steps=cfg.short_steps) for _ in range(cfg.n_envs)]
     if agent is None:
         agent = Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, seed=cfg.seed,
-                      mlp_backward=pieces.mlp_backward)
-    evals = eval_tasks(cfg, envs[0])
+                      mlp_backward=pieces.mlp_backward, dtype=cfg.dtype)
     run = run or RunState(results=dict(config=asdict(cfg), rounds=[], wallclock={}))
-    for k in range(run.last_round + 1, cfg.rounds + 1):
-        with phase(f"round {k}"):
-            if k == 0:
-                record, tasks, run.buffer_obs, run.buffer_act = base_skills(
-                    agent, cfg, envs, short_envs, rng, pieces, bar, log)
-                run.all_tasks, run.prev_tasks = list(tasks), tasks
-            elif cfg.baseline == "direct-ppo":
-                log(f"[round {k}] direct PPO on the evaluation tasks")
-                record = direct_ppo(agent, evals, cfg, envs, short_envs, rng, pieces, bar)
-            else:
-                log(f"[round {k}] task expansion from {len(run.prev_tasks)} tasks")
-                demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng,
-                                             pieces, bar)
-                stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos],
-                                   cfg.n_blocks)
-                unusable = info["successful"] - info["joined"] - info["relabelled"]
-                log(f"  {info['attempts']} attempts, {info['successful']} successful: "
-                    f"{info['joined']} joined, {info['relabelled']} relabelled, {unusable} unusable"
-                    f"; {stats['high_goal_tasks']} tasks with >= 3 high goals")
-                record = dict(expansion=info)
-                if demos:
-                    record.update(self_distill(agent, run, demos, cfg, envs, short_envs, rng,
-                                               pieces, bar, log))
+    with physics_pool(workers, cfg.n_blocks) as pool:
+        envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool)
+        short_envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool)
+        evals = eval_tasks(cfg, envs[0])
+        for k in range(run.last_round + 1, cfg.rounds + 1):
+            with phase(f"round {k}"):
+                if k == 0:
+                    record, tasks, run.buffer_obs, run.buffer_act = base_skills(
+                        agent, cfg, envs, short_envs, rng, pieces, bar, log)
+                    run.all_tasks, run.prev_tasks = list(tasks), tasks
+                elif cfg.baseline == "direct-ppo":
+                    log(f"[round {k}] direct PPO on the evaluation tasks")
+                    record = direct_ppo(agent, evals, cfg, envs, short_envs, rng, pieces, bar)
                 else:
-                    log("  no demonstrations generated; keeping the current policy")
-                record.update(stats)
-        run.results["rounds"].append(dict(round=k, eval=evaluate(agent, evals, envs), **record))
-        run.last_round = k
-        if on_round:
-            on_round(k, agent, run, rng)
+                    record = expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar,
+                                             log)
+            run.results["rounds"].append(dict(round=k, eval=evaluate(agent, evals, envs),
+                                              **record))
+            run.last_round = k
+            if on_round:
+                on_round(k, agent, run, rng)
     return run
 
 

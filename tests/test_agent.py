@@ -360,6 +360,31 @@ def test_bc_learns_to_copy_the_goal():
     assert np.mean(np.all(agent.act(test_obs, deterministic=True) == test_acts, 1)) > 0.7
 
 
+def test_float32_agent_learns_like_float64_and_round_trips(tmp_path):
+    """Training runs in float32 (twice as fast): the same weights at the start (rounded), the same
+    learning, and a checkpoint that keeps its dtype; a file whose arrays disagree with its header
+    is refused."""
+    rng = np.random.default_rng(13)
+    a64, a32 = Agent(hidden=64, seed=0), Agent(hidden=64, seed=0, dtype="float32")
+    assert all(p.dtype == np.float32 for p in a32.state_dict().values())
+    assert all(np.allclose(a32.state_dict()[k], v, atol=1e-6) for k, v in a64.state_dict().items())
+    obs, acts = copy_goal_task(rng, 1024, a32)
+    test_obs, test_acts = copy_goal_task(rng, 200, a32)
+    for ag in (a64, a32):
+        ag.bc(obs, acts, epochs=30, batch_size=64, lr=3e-3, rng=np.random.default_rng(0))
+    hits = [np.mean(np.all(ag.act(test_obs, deterministic=True) == test_acts, 1))
+            for ag in (a64, a32)]
+    assert hits[1] > 0.7 and abs(hits[0] - hits[1]) < 0.1, hits
+    a32.save(tmp_path / "a.npz")
+    back = Agent.load(tmp_path / "a.npz")
+    assert back.dtype == np.float32 and np.array_equal(back.act(test_obs, deterministic=True),
+                                                       a32.act(test_obs, deterministic=True))
+    data = dict(np.load(tmp_path / "a.npz"))
+    np.savez(tmp_path / "b.npz", **{**data, "dtype": np.array("float64")})
+    with pytest.raises(ValueError, match="expected finite float64"):
+        Agent.load(tmp_path / "b.npz")
+
+
 def test_ppo_update_raises_advantaged_action_and_fit_value():
     rng = np.random.default_rng(14)
     agent = Agent(hidden=16, seed=0)

@@ -8,6 +8,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 import tracemalloc
 
 import numpy as np
@@ -85,7 +86,7 @@ def test_damaged_results_json_sends_the_user_nowhere_in_circles(tmp_path, capsys
     cli.main(["--rounds", "1", *TINY, "--out", out])
     with open(os.path.join(out, "results.json"), "w") as f:
         f.write("{broken")
-    cfg, _, resume, _ = cli.parse_args(["--resume", "--rounds", "2", "--out", out])
+    cfg, _, resume, *_ = cli.parse_args(["--resume", "--rounds", "2", "--out", out])
     assert resume and cfg.rounds == 2
     with open(os.path.join(out, "state.npz"), "w") as f:
         f.write("broken")
@@ -108,7 +109,7 @@ def test_every_config_field_is_a_flag():
 
 
 def test_blocks_flag_names_the_run_and_reaches_the_world(tmp_path):
-    cfg, out, _, _ = cli.parse_args(["--blocks", "7"])
+    cfg, out, *_ = cli.parse_args(["--blocks", "7"])
     assert cfg.n_blocks == 7 and out == os.path.join("runs", "ours-7blocks-seed0")
 
 
@@ -146,7 +147,7 @@ def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
     cli.main(["--resume", "--rounds", "2", "--out", one])
     cli.main(["--rounds", "2", *TINY, "--out", two])
     assert results_without_clock(one) == results_without_clock(two)
-    cfg, _, _, _ = cli.parse_args(["--rounds", "3", *TINY, "--seed", "1",
+    cfg, *_ = cli.parse_args(["--rounds", "3", *TINY, "--seed", "1",
                                    "--out", str(tmp_path / "new")])
     with pytest.raises(ValueError,
                        match=r"state.npz: saved by a run with other settings.*'seed': \(0, 1\)"):
@@ -161,6 +162,45 @@ def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert (e.value.code == 2 and len(err) == 1 and "cannot resume" in err[0]
             and "state.npz: not a readable" in err[0])
+
+
+def test_any_number_of_workers_gives_the_same_bytes(tmp_path):
+    """The physics runs in worker processes, every random draw in the main process: one worker or
+    three, the results and the checkpoints are the same."""
+    outs = [str(tmp_path / f"workers{w}") for w in (1, 3)]
+    for w, out in zip((1, 3), outs):
+        cli.main(["--rounds", "1", *TINY, "--workers", str(w), "--out", out])
+    assert results_without_clock(outs[0]) == results_without_clock(outs[1])
+    for k in range(2):
+        with open(os.path.join(outs[0], f"round{k}.npz"), "rb") as a, \
+                open(os.path.join(outs[1], f"round{k}.npz"), "rb") as b:
+            assert a.read() == b.read(), k
+
+
+def alive(pid):
+    """True while process pid runs (a zombie, dead but not yet reaped, counts as gone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/task"), reason="needs Linux's /proc")
+def test_a_killed_run_leaves_no_workers_behind(tmp_path):
+    p = child("--rounds", "3", *TINY, "--workers", "2", "--out", str(tmp_path / "run"))
+    for line in p.stdout:
+        if line.startswith("round 0:"):
+            break
+    with open(f"/proc/{p.pid}/task/{p.pid}/children") as f:
+        workers = [int(pid) for pid in f.read().split()]
+    assert len(workers) >= 2, workers                       # the pool (and its helpers)
+    p.kill()
+    p.communicate()
+    deadline = time.time() + 20
+    while any(alive(pid) for pid in workers) and time.time() < deadline:
+        time.sleep(0.2)
+    assert not any(alive(pid) for pid in workers)
 
 
 def test_ctrl_c_stops_cleanly_and_says_how_to_resume(tmp_path):
@@ -228,7 +268,7 @@ def test_memory_stays_flat_and_the_buffer_bounded(tmp_path):
     """Python-tracked memory (numpy arrays included) after each of 8 rounds grows by < 0.2 MB per
     round from round 2 on: a leak of every round's episodes measures +0.43 MB per round here,
     this code -0.06. And the demo buffer and task list hold at most buffer_size entries."""
-    cfg, _, _, _ = cli.parse_args(["--rounds", "7", *TINY, "--out", str(tmp_path)])
+    cfg, *_ = cli.parse_args(["--rounds", "7", *TINY, "--out", str(tmp_path)])
     cfg.buffer_size = 300                                  # < the 400 base demos: the bound binds
     after = []
 
