@@ -1,6 +1,6 @@
-"""exercises/behaviour.py -- exercise 7: the student's mlp_backward, gae and ppo_loss, passed to the
-library's training code, must train the base policy (sec 4.1) past a measured bar within a fixed
-budget.  ~100 lines.
+"""exercises/behaviour.py -- exercise 7: the student's mlp_backward, policy distribution
+(exercise 2), gae and ppo_loss, passed to the library's training code, must train the base policy
+(sec 4.1) past a measured bar within a fixed budget.  ~170 lines.
 
 BC alone would already solve many base tasks, and then a broken PPO could pass.  So BC is kept weak
 on purpose (3000 demos, 8 epochs: 14-25% greedy success on 200 held-out base tasks), and the check
@@ -18,36 +18,74 @@ import agent
 import taskexp
 from env2d import N_X, BlockWorld
 
-from .checks import Report
+from .checks import Report, graded
+from .dist import NotDone
+from .problems import EX7_NEEDS, FUNCTIONS, NOTEBOOKS
 
 # measured: see notebooks/exercises/ex7_base_policy.ipynb
 EX7 = dict(seed=0, n_blocks=4, hidden=64, demos=3000, bc_epochs=8, ppo_steps=30000, eval_tasks=200,
            threshold=0.40, min_gain=0.20)
 
 
-def student_pieces(gae=None, ppo_loss=None, mlp_backward=None):
+class StudentAgent(agent.Agent):
+    """agent.Agent whose policy distribution is `dist` (the student's, exercise 2) wherever the
+    library's uses agent.ActionDist: acting, sampling and behaviour cloning. agent.Agent takes
+    the MLP backward pass as a parameter but not the distribution, so these three methods are
+    agent.Agent's with ActionDist replaced by self.dist."""
+
+    def __init__(self, *args, dist, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.dist = dist
+
+    def act(self, obs, deterministic=False, rng=None):
+        obs, single = self._batched(obs)
+        d = self.dist(self.actor.forward(self.features(obs)), self.n_x)
+        a = d.mode() if deterministic else d.sample(self.rng if rng is None else rng)
+        return a[0] if single else a
+
+    def sample(self, obs, rng=None):
+        f = self.features(obs)
+        d = self.dist(self.actor.forward(f), self.n_x)
+        a = d.sample(self.rng if rng is None else rng)
+        return a, d.log_prob(a), self.critic.forward(f)[..., 0].mean(-1)
+
+    def bc(self, obs, actions, epochs, batch_size, lr, rng, max_grad_norm=None):
+        def bc_loss(out, a):                  # agent.bc_loss: L = -mean log pi(a | s, g)
+            d = self.dist(out, self.n_x)
+            return -d.log_prob(a).mean(), d.backward(a, -1.0 / len(a), 0.0)
+        actions = np.asarray(actions, dtype=np.int64)
+        self._check_actions(actions)
+        return self._fit("BC", self.actor, self.actor_opt, bc_loss, obs, actions, epochs,
+                         batch_size, lr, rng, max_grad_norm)
+
+
+def student_pieces(gae=None, ppo_loss=None, mlp_backward=None, dist=None):
     """taskexp.Pieces with the student's functions where given (the library's elsewhere), for
     the training code to call. The student's ppo_loss returns (L, dL/dout); the library's also
-    returns the metrics that Agent.ppo_update logs, so they are computed here around it."""
+    returns the metrics that Agent.ppo_update logs, so they are computed here around it, with
+    the student's distribution `dist` if given."""
     pieces = taskexp.Pieces()
     if gae is not None:
         pieces.gae = gae
     if mlp_backward is not None:
         pieces.mlp_backward = mlp_backward
     if ppo_loss is not None:
+        Dist = dist or agent.ActionDist
+
         def with_metrics(out, actions, logp_old, adv, n_x, clip, ent_coef):
             L, dout = ppo_loss(out, actions, logp_old, adv, n_x, clip, ent_coef)[:2]
-            d = agent.ActionDist(out, n_x)
+            d = Dist(out, n_x)
             return L, dout, dict(policy_loss=L, entropy=d.entropy().mean(),
                                  ratio=np.exp(d.log_prob(actions) - logp_old))
         pieces.ppo_loss = with_metrics
     return pieces
 
 
-def base_policy_success(gae=None, ppo_loss=None, mlp_backward=None, seed=EX7["seed"]):
+def base_policy_success(gae=None, ppo_loss=None, mlp_backward=None, dist=None, seed=EX7["seed"]):
     """BC on a few single-block demos (a weak start on purpose), then PPO on the base tasks, with
-    the given pieces passed to the training code.  -> (greedy success after BC, after PPO,
-    seconds) on held-out base tasks."""
+    the given pieces passed to the training code (dist: the policy distribution, default
+    agent.ActionDist).  -> (greedy success after BC, after PPO, seconds) on held-out base
+    tasks."""
     c, t0 = EX7, time.time()
     cfg = taskexp.Config(seed=seed, n_blocks=c["n_blocks"], hidden=c["hidden"], max_steps=3,
                          ppo_steps=c["ppo_steps"], ppo_episodes=128, ppo_lr=3e-3, stretch=0.0,
@@ -59,9 +97,10 @@ def base_policy_success(gae=None, ppo_loss=None, mlp_backward=None, seed=EX7["se
                                   c["eval_tasks"])[0]
     greedy = lambda ag: taskexp.success_rate(taskexp.run_episodes(ag, held_out, envs,
                                                                   deterministic=True))
-    pieces = student_pieces(gae, ppo_loss, mlp_backward)
-    ag = agent.Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, seed=seed,
-                     mlp_backward=pieces.mlp_backward)
+    pieces = student_pieces(gae, ppo_loss, mlp_backward, dist)
+    kind, extra = (agent.Agent, {}) if dist is None else (StudentAgent, dict(dist=dist))
+    ag = kind(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, seed=seed,
+              mlp_backward=pieces.mlp_backward, **extra)
     ag.bc(obs, actions, c["bc_epochs"], cfg.bc_batch, cfg.bc_lr, rng)
     before = greedy(ag)
     taskexp.ppo_phase(ag, tasks, cfg, envs, envs, rng, "PPO with your gae and ppo_loss",
@@ -69,24 +108,59 @@ def base_policy_success(gae=None, ppo_loss=None, mlp_backward=None, seed=EX7["se
     return before, greedy(ag), time.time() - t0
 
 
-def check_ex7(mlp_backward, gae, ppo_loss):
-    """Behavioural: with the student's pieces, PPO lifts the base policy's greedy success on 200
-    held-out base tasks to >= threshold, and by >= min_gain over BC alone, within ppo_steps
-    steps."""
+def unfinished(mlp_backward, gae, ppo_loss, dist=None):
+    """The exercises among ex1-ex4 whose functions still raise NotImplementedError, found by
+    calling each once on tiny inputs (a minute of training would stop at the first only)."""
+    out = np.random.default_rng(0).standard_normal((2, 2, 6))           # n_x = 3, n_y = 2
+    actions = np.array([[0, 1, 1], [1, 2, 0]])
+
+    def use_dist():
+        if dist is not None:
+            d = dist(out, 3)
+            d.log_prob(actions), d.entropy(), d.backward(actions, 1.0, 1.0)
+    probes = {
+        "ex1": lambda: mlp_backward({"W0": np.ones((2, 1)), "b0": np.zeros(1)},
+                                    [np.ones((1, 2)), np.ones((1, 1))], np.ones((1, 1))),
+        "ex2": use_dist,
+        "ex3": lambda: gae(*[np.zeros((1, 1))] * 5, 0.9, 0.9),
+        "ex4": lambda: ppo_loss(out, actions, np.zeros(2), np.ones(2), 3, 0.2, 0.01)}
+    missing = []
+    for ex, probe in probes.items():
+        try:
+            probe()
+        except NotDone:                    # ppo_loss's ActionDist: exercise 2 is missing
+            missing.append("ex2")
+        except NotImplementedError:
+            missing.append(ex)
+        except Exception:                  # a wrong answer: the training shows what it does
+            pass
+    return sorted(set(missing))
+
+
+@graded
+def check_ex7(mlp_backward, gae, ppo_loss, dist=None):
+    """Behavioural: with the student's pieces (dist: their exercise 2's distribution, or None for
+    agent.ActionDist), PPO lifts the base policy's greedy success on 200 held-out base tasks to
+    >= threshold, and by >= min_gain over BC alone, within ppo_steps steps."""
     rep, c = Report("ex7"), EX7
-    print(f"ex7: BC on {c['demos']} demos, then PPO for {c['ppo_steps']} steps "
-          "(about a minute) ...", flush=True)
     before, after, secs = 0.0, 0.0, 0.0
-    try:
-        before, after, secs = base_policy_success(gae, ppo_loss, mlp_backward)
-        problem = None if after >= c["threshold"] and after - before >= c["min_gain"] else (
-            f"greedy success: BC alone {before:.0%}, after PPO {after:.0%}; "
-            f"required >= {c['threshold']:.0%} and >= BC alone + {100 * c['min_gain']:.0f} points")
-    except NotImplementedError:
-        problem = "raised NotImplementedError: do ex1, ex3 and ex4 first"
-    except Exception as e:
-        problem = f"training raised {type(e).__name__}: {e}"
+    missing = unfinished(mlp_backward, gae, ppo_loss, dist)
+    if missing:
+        names = [f"{ex} ({', '.join(FUNCTIONS[ex])} in {NOTEBOOKS[ex]})" for ex in missing]
+        todo = ", ".join(missing[:-1]) + " and " * (len(missing) > 1) + missing[-1]
+        problem = (f"not done yet (raises NotImplementedError): {'; '.join(names)}. "
+                   f"Exercise 7 trains with your {', '.join(EX7_NEEDS)}: do {todo} first")
+    else:
+        print(f"ex7: BC on {c['demos']} demos, then PPO for {c['ppo_steps']} steps "
+              "(about a minute) ...", flush=True)
+        try:
+            before, after, secs = base_policy_success(gae, ppo_loss, mlp_backward, dist)
+            problem = None if after >= c["threshold"] and after - before >= c["min_gain"] else (
+                f"greedy success: BC alone {before:.0%}, after PPO {after:.0%}; required >= "
+                f"{c['threshold']:.0%} and >= BC alone + {100 * c['min_gain']:.0f} points")
+        except Exception as e:
+            problem = f"training raised {type(e).__name__}: {e}"
     rep.case("base policy", f"seed {c['seed']}, {c['n_blocks']} blocks", problem,
-             "pass check_ex1, check_ex3 and check_ex4 first; if they pass and success falls, "
+             f"pass check_{', check_'.join(EX7_NEEDS)} first; if they pass and success falls, "
              "look for a sign: PPO minimises L = -mean min(rA, clip(r) A)")
-    return rep.done(f" (success {before:.0%} after BC -> {after:.0%} after PPO, {secs:.0f} s)")
+    rep.done(f" (success {before:.0%} after BC -> {after:.0%} after PPO, {secs:.0f} s)")

@@ -1,11 +1,20 @@
-"""exercises/checks.py -- the checks of exercises 1-6, and the reporting they share.  ~420 lines.
+"""exercises/checks.py -- the checks of exercises 1-6, and the reporting they share.  ~500 lines.
 
-Each check_exN(student functions) runs them on fixed random inputs of varied shapes plus edge cases,
-compares with the library (REFERENCE), prints PASS or FAIL (the case, expected vs got, a hint), and
-returns True/False.  Every case has its own seed, so a check is deterministic.
+Each check_exN(student functions) runs them on fixed inputs of varied shapes plus edge cases and
+compares them with the reference solution. It prints one PASS line and returns None, or raises an
+AssertionError whose message gives the first failing case, expected vs got, and a hint. Every case
+has its own seed, so a check is deterministic.
+
+A case's inputs and expected outputs come from its make() function, run on the library (REFERENCE)
+in the repository; a student kit, whose library has stubs, reads them from recorded test vectors
+(vectors.py). The comparisons and hints are the same code in both.
 """
+import contextlib
 import copy
+import functools
+import sys
 import traceback
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
@@ -13,6 +22,8 @@ import numpy as np
 import agent
 import taskexp
 from env2d import BLOCK_H, TABLE_X, THRESHOLD, X_BINS, layer_y, observation
+
+from .vectors import case
 
 
 def tiny_env(n_blocks):
@@ -24,6 +35,7 @@ def tiny_env(n_blocks):
 
 
 # ---- Reference solutions: the library, in the students' signatures --------------------------
+# Only make() functions call them, so that a student kit (stubs, recorded cases) never does.
 
 def _ref_logp_entropy(out, actions, n_x):
     d = agent.ActionDist(out, n_x)
@@ -34,16 +46,18 @@ REFERENCE = dict(
     mlp_backward=agent.mlp_backward, logp_entropy=_ref_logp_entropy,
     logp_entropy_backward=lambda out, actions, n_x, a, c:
         agent.ActionDist(out, n_x).backward(actions, a, c),
+    log_softmax=lambda z: agent.log_softmax(z),
     gae=agent.gae, ppo_loss=lambda *args, **kw: agent.ppo_loss(*args, **kw)[:2],
     alter=lambda goals, env, rng: taskexp.alter(goals, env, rng),
     select_goal=lambda ag, s0, sT, cands: taskexp.select_goal(ag, s0, sT, cands)[0],
-    relabel=taskexp.relabel)
+    relabel=lambda traj, env: taskexp.relabel(traj, env))
 
 
 # ---- Reporting ---------------------------------------------------------------------------------
 
 class Report:
-    """Collects failing cases; prints PASS, or FAIL with the first failure in detail."""
+    """Collects failing cases; done() prints PASS, or raises AssertionError with the first
+    failure in detail."""
 
     def __init__(self, name):
         self.name, self.failures, self.cases = name, [], 0
@@ -57,15 +71,46 @@ class Report:
     def done(self, extra=""):
         if not self.failures:
             print(f"{self.name} PASS: {self.cases} case{'s' * (self.cases != 1)}{extra}")
-            return True
+            return
         name, detail, problem, hint = self.failures[0]
-        print(f"{self.name} FAIL: case {name!r} ({detail})\n  {problem}")
+        lines = [f"{self.name} FAIL: case {name!r} ({detail})", f"  {problem}"]
         if hint and "NotImplementedError" not in problem:
-            print(f"  hint: {hint}")
+            lines.append(f"  hint: {hint}")
         if len(self.failures) > 1:
             others = list(dict.fromkeys(f[0] for f in self.failures[1:]))
-            print(f"  ({len(self.failures)} of {self.cases} cases failed; "
-                  f"also: {'; '.join(others[:5])})")
+            lines.append(f"  ({len(self.failures)} of {self.cases} cases failed; "
+                         f"also: {'; '.join(others[:5])})")
+        raise AssertionError("\n".join(lines))
+
+
+def graded(check):
+    """What a graded notebook cell runs. nbgrader gives no points to a graded cell that writes to
+    stderr, even when the check passes, so the check's warnings (numpy's, on a student's overflow)
+    and anything written to sys.stderr go to stdout; a warning is reported once, as a note."""
+    @functools.wraps(check)
+    def run(*args, **kwargs):
+        with warnings.catch_warnings(record=True) as caught, \
+                contextlib.redirect_stderr(sys.stdout):
+            warnings.simplefilter("always")
+            try:
+                check(*args, **kwargs)
+            except AssertionError as failed:    # raised again here: a traceback of two frames,
+                raise AssertionError(str(failed)) from None     # the cell's and this line
+            finally:
+                seen = list(dict.fromkeys(f"{w.category.__name__}: {w.message}" for w in caught))
+                if seen:
+                    print(f"  note: {len(caught)} warning{'s' * (len(caught) > 1)} while checking"
+                          f", e.g. {seen[0]}")
+    return run
+
+
+def passes(check, *args, **kwargs):
+    """check(*args) -> True if it passes, False if it fails (its message printed)."""
+    try:
+        check(*args, **kwargs)
+        return True
+    except AssertionError as e:
+        print(e)
         return False
 
 
@@ -77,8 +122,8 @@ def call(fn, *args, **kw):
     """fn(*args) -> (result, None), or (None, what it raised) -- a student's code may raise."""
     try:
         return fn(*copy.deepcopy(args), **kw), None    # copies: the student cannot spoil our inputs
-    except NotImplementedError:
-        return None, NOT_DONE
+    except NotImplementedError as e:                   # with a message: the exercise it needs
+        return None, f"raised NotImplementedError: {e}" if str(e) else NOT_DONE
     except Exception as e:                          # point at the student's line, not at numpy's
         frames = [f for f in traceback.extract_tb(e.__traceback__)[1:]
                   if "site-packages" not in f.filename]
@@ -113,6 +158,28 @@ def first(*problems):
 
 # ---- ex1: the MLP backward pass ------------------------------------------------------------------
 
+def mlp_forward(params, x):
+    """agent.MLP's forward pass (tanh hidden layers, linear output), for the finite differences."""
+    L = len(params) // 2
+    for k in range(L):
+        x = x @ params[f"W{k}"] + params[f"b{k}"]
+        x = np.tanh(x) if k < L - 1 else x
+    return x
+
+
+def _make_ex1(sizes, B, scale, seed):
+    net = agent.MLP(sizes, seed=seed)
+    rng = np.random.default_rng(seed)
+    for k in range(net.n_layers):
+        net.params[f"W{k}"] *= scale
+        net.params[f"b{k}"] += 0.3 * rng.standard_normal(sizes[k + 1])
+    x, dout = rng.standard_normal((B, sizes[0])), rng.standard_normal((B, sizes[-1]))
+    net.forward(x)
+    grads, dx = agent.mlp_backward(net.params, net.hs, dout)
+    return dict(params=net.params, hs=net.hs, dout=dout, grads=grads, dx=dx)
+
+
+@graded
 def check_ex1(mlp_backward):
     """mlp_backward(params, hs, dout) -> (grads, dx), against agent.mlp_backward and finite
     differences."""
@@ -131,16 +198,10 @@ def check_ex1(mlp_backward):
               "1 - h^2 is near 0 where tanh saturates: "
               "use h = hs[k+1] (the tanh output), not z")]
     for seed, (name, sizes, B, scale, hint) in enumerate(cases):
-        net = agent.MLP(sizes, seed=seed)
-        rng = np.random.default_rng(seed)
-        for k in range(net.n_layers):
-            net.params[f"W{k}"] *= scale
-            net.params[f"b{k}"] += 0.3 * rng.standard_normal(sizes[k + 1])
-        x, dout = rng.standard_normal((B, sizes[0])), rng.standard_normal((B, sizes[-1]))
-        net.forward(x)
-        want, want_dx = agent.mlp_backward(net.params, net.hs, dout)
+        c = case(f"ex1/{seed}", lambda: _make_ex1(sizes, B, scale, seed))
+        want, want_dx = c["grads"], c["dx"]
         detail = f"sizes {sizes}, B={B}, seed {seed}"
-        res, err = call(mlp_backward, net.params, net.hs, dout)
+        res, err = call(mlp_backward, c["params"], c["hs"], c["dout"])
         if err is None and not (isinstance(res, tuple) and len(res) == 2
                                 and isinstance(res[0], dict)):
             err = f"returned {type(res).__name__}, expected a tuple (grads dict, dx)"
@@ -153,12 +214,13 @@ def check_ex1(mlp_backward):
                  first(*(diff(f"grads[{k!r}]", grads[k], want[k]) for k in want),
                        diff("dx", dx, want_dx)), hint)
         if name == "two layers" and not rep.failures:     # and against the definition of a gradient
-            f = lambda: np.sum(net.forward(x) * dout)      # L = sum(out * dout) has dL/dout = dout
+            params, x = copy.deepcopy(c["params"]), c["hs"][0]
+            f = lambda: np.sum(mlp_forward(params, x) * c["dout"])   # dL/dout = dout
             rep.case("finite differences", detail,
                      first(*(diff(f"grads[{k!r}] vs finite differences", grads[k],
                                   numerical_grad(f, p), 1e-5, 1e-6)
-                             for k, p in net.params.items())), hint)
-    return rep.done(" (agrees with agent.mlp_backward and central finite differences)")
+                             for k, p in params.items())), hint)
+    rep.done(" (agrees with the reference, agent.mlp_backward, and central finite differences)")
 
 
 def numerical_grad(f, x, eps=1e-6):
@@ -177,9 +239,23 @@ def numerical_grad(f, x, eps=1e-6):
 
 # ---- ex2: log-probability and entropy of pi(b, x, y) -------------------------------------------
 
-def check_ex2(logp_entropy, logp_entropy_backward):
+def _make_ex2(B, n, n_x, n_y, scale, seed):
+    rng = np.random.default_rng(seed)
+    out = scale * rng.standard_normal((B, n, 1 + n_x + n_y))
+    actions = np.stack([rng.integers(n, size=B), rng.integers(n_x, size=B),
+                        rng.integers(n_y, size=B)], 1)
+    a, c = rng.standard_normal(B), rng.standard_normal(B)
+    logp, H = _ref_logp_entropy(out, actions, n_x)
+    return dict(out=out, actions=actions, a=a, c=c, logp=logp, H=H,
+                dout=agent.ActionDist(out, n_x).backward(actions, a, c),
+                log_softmax=agent.log_softmax(out))
+
+
+@graded
+def check_ex2(logp_entropy, logp_entropy_backward, log_softmax=None):
     """logp_entropy(out, actions, n_x) -> (logp (B,), H (B,)); logp_entropy_backward(out, actions,
-    n_x, a (B,), c (B,)) -> d/dout of sum_k a_k logp_k + c_k H_k (B, n, 1 + n_x + n_y)."""
+    n_x, a (B,), c (B,)) -> d/dout of sum_k a_k logp_k + c_k H_k (B, n, 1 + n_x + n_y); and, when
+    given, log_softmax(z) over the last axis (exercises.action_dist samples with it)."""
     rep = Report("ex2")
     heads = ("log pi(b, x, y) = logsoftmax(l)[b] + logsoftmax(X_b)[x] + logsoftmax(Y_b)[y], "
              "with out[..., 0] = l, out[..., 1:1+n_x] = X, out[..., 1+n_x:] = Y; "
@@ -195,28 +271,38 @@ def check_ex2(logp_entropy, logp_entropy_backward):
               "subtract the max before exp (log-sum-exp), "
               "and count p log p as 0 where p = 0: no inf or nan")]
     for seed, (name, B, n, n_x, n_y, scale, hint) in enumerate(cases):
-        rng = np.random.default_rng(100 + seed)
-        out = scale * rng.standard_normal((B, n, 1 + n_x + n_y))
-        actions = np.stack([rng.integers(n, size=B), rng.integers(n_x, size=B),
-                            rng.integers(n_y, size=B)], 1)
-        a, c = rng.standard_normal(B), rng.standard_normal(B)
+        c = case(f"ex2/{seed}", lambda: _make_ex2(B, n, n_x, n_y, scale, 100 + seed))
+        out, actions = c["out"], c["actions"]
         detail = f"B={B}, n={n}, n_x={n_x}, n_y={n_y}, seed {100 + seed}"
-        want_lp, want_h = _ref_logp_entropy(out, actions, n_x)
         res, err = call(logp_entropy, out, actions, n_x)
         if err is None and not (isinstance(res, tuple) and len(res) == 2):
             err = f"logp_entropy returned {type(res).__name__}, expected a tuple (logp, H)"
         rep.case(name, detail,
-                 err or first(diff("logp", res[0], want_lp), diff("H", res[1], want_h)), hint)
-        d, err = call(logp_entropy_backward, out, actions, n_x, a, c)
-        want_d = agent.ActionDist(out, n_x).backward(actions, a, c)
+                 err or first(diff("logp", res[0], c["logp"]), diff("H", res[1], c["H"])), hint)
+        d, err = call(logp_entropy_backward, out, actions, n_x, c["a"], c["c"])
         rep.case("backward, " + name, detail,
-                 err and "logp_entropy_backward " + err or diff("dout", d, want_d),
+                 err and "logp_entropy_backward " + err or diff("dout", d, c["dout"]),
                  hint if scale > 100 else grad)
-    return rep.done(" (logp, H and their gradient agree with agent.ActionDist)")
+        if log_softmax is not None:
+            ls, err = call(log_softmax, out)
+            rep.case("log_softmax, " + name, detail,
+                     err and "log_softmax " + err or diff("log_softmax(out)", ls,
+                                                          c["log_softmax"]),
+                     "log_softmax(z) = z - max(z) - log sum exp(z - max(z)), over the last axis")
+    rep.done(" (logp, H and their gradient agree with the reference, agent.ActionDist)")
 
 
 # ---- ex3: generalised advantage estimation -------------------------------------------------------
 
+def _make_ex3(T, N, p_term, p_trunc, gamma, lam, seed):
+    rng = np.random.default_rng(seed)
+    r, v, nv = rng.random((T, N)), rng.standard_normal((T, N)), rng.standard_normal((T, N))
+    te, tr = (rng.random((T, N)) < p_term) * 1.0, (rng.random((T, N)) < p_trunc) * 1.0
+    adv, ret = agent.gae(r, v, te, tr, nv, gamma, lam)
+    return dict(r=r, v=v, te=te, tr=tr, nv=nv, adv=adv, ret=ret)
+
+
+@graded
 def check_ex3(gae):
     """gae(rewards, values, terminated, truncated, next_values, gamma, lam) -> (adv, returns),
     all (T, N)."""
@@ -243,21 +329,33 @@ def check_ex3(gae):
              ("lam = 0 (one-step TD)", 6, 2, 0.2, 0.2, 0.9, 0.0, "lam = 0: A_t = delta_t"),
              ("lam = 1 (Monte Carlo)", 8, 2, 0.2, 0.2, 0.9, 1.0, rec)]
     for seed, (name, T, N, p_term, p_trunc, gamma, lam, hint) in enumerate(cases):
-        rng = np.random.default_rng(200 + seed)
-        r, v, nv = rng.random((T, N)), rng.standard_normal((T, N)), rng.standard_normal((T, N))
-        te, tr = (rng.random((T, N)) < p_term) * 1.0, (rng.random((T, N)) < p_trunc) * 1.0
-        want_adv, want_ret = agent.gae(r, v, te, tr, nv, gamma, lam)
-        res, err = call(gae, r, v, te, tr, nv, gamma, lam)
+        c = case(f"ex3/{seed}", lambda: _make_ex3(T, N, p_term, p_trunc, gamma, lam, 200 + seed))
+        res, err = call(gae, c["r"], c["v"], c["te"], c["tr"], c["nv"], gamma, lam)
         if err is None and not (isinstance(res, tuple) and len(res) == 2):
             err = f"returned {type(res).__name__}, expected a tuple (advantages, returns)"
         detail = f"T={T}, N={N}, gamma={gamma}, lam={lam}, seed {200 + seed}"
-        rep.case(name, detail, err or first(diff("advantages", res[0], want_adv),
-                                     diff("returns", res[1], want_ret)), hint)
-    return rep.done(" (agrees with agent.gae)")
+        rep.case(name, detail, err or first(diff("advantages", res[0], c["adv"]),
+                                     diff("returns", res[1], c["ret"])), hint)
+    rep.done(" (agrees with the reference, agent.gae)")
 
 
 # ---- ex4: the PPO clipped surrogate --------------------------------------------------------------
 
+def _make_ex4(B, n, n_x, n_y, lo, hi, clip, ent, seed):
+    rng = np.random.default_rng(seed)
+    out = rng.standard_normal((B, n, 1 + n_x + n_y))
+    actions = np.stack([rng.integers(n, size=B), rng.integers(n_x, size=B),
+                        rng.integers(n_y, size=B)], 1)
+    r = rng.uniform(1 - lo, 1 + hi, B)                    # the ratios pi / pi_old
+    if lo >= 0.5:
+        r = np.where(rng.random(B) < 0.5, rng.uniform(1.3, 1.6, B), rng.uniform(0.4, 0.7, B))
+    logp_old = agent.ActionDist(out, n_x).log_prob(actions) - np.log(r)
+    adv = rng.standard_normal(B)
+    L, dout = agent.ppo_loss(out, actions, logp_old, adv, n_x, clip, ent)[:2]
+    return dict(out=out, actions=actions, logp_old=logp_old, adv=adv, L=L, dout=dout)
+
+
+@graded
 def check_ex4(ppo_loss):
     """ppo_loss(out, actions, logp_old, adv, n_x, clip, ent_coef) -> (L, dL/dout (B, n, D))."""
     rep = Report("ex4")
@@ -280,24 +378,17 @@ def check_ex4(ppo_loss):
              ("clip = 0.1", 9, 3, 4, 3, 0.3, 0.3, 0.1, 0.0,
               "use the clip argument, not a constant 0.2")]
     for seed, (name, B, n, n_x, n_y, lo, hi, clip, ent, hint) in enumerate(cases):
-        rng = np.random.default_rng(300 + seed)
-        out = rng.standard_normal((B, n, 1 + n_x + n_y))
-        actions = np.stack([rng.integers(n, size=B), rng.integers(n_x, size=B),
-                            rng.integers(n_y, size=B)], 1)
-        r = rng.uniform(1 - lo, 1 + hi, B)
-        if lo >= 0.5:
-            r = np.where(rng.random(B) < 0.5, rng.uniform(1.3, 1.6, B), rng.uniform(0.4, 0.7, B))
-        logp_old = agent.ActionDist(out, n_x).log_prob(actions) - np.log(r)
-        adv = rng.standard_normal(B)
-        want_l, want_d = agent.ppo_loss(out, actions, logp_old, adv, n_x, clip, ent)[:2]
-        res, err = call(ppo_loss, out, actions, logp_old, adv, n_x, clip, ent)
+        c = case(f"ex4/{seed}", lambda: _make_ex4(B, n, n_x, n_y, lo, hi, clip, ent, 300 + seed))
+        res, err = call(ppo_loss, c["out"], c["actions"], c["logp_old"], c["adv"], n_x, clip, ent)
         if err is None and not (isinstance(res, tuple) and len(res) >= 2):
             err = f"returned {type(res).__name__}, expected a tuple (L, dL/dout)"
         detail = (f"B={B}, n={n}, n_x={n_x}, n_y={n_y}, clip={clip}, ent_coef={ent}, "
                   f"seed {300 + seed}")
-        problem = err or first(diff("L", res[0], want_l), diff("dL/dout", res[1], want_d))
-        rep.case(name, detail, problem, loss if problem and "sign error" in problem else hint)
-    return rep.done(" (L and dL/dout agree with agent.ppo_loss)")
+        problem = err or first(diff("L", res[0], c["L"]), diff("dL/dout", res[1], c["dout"]))
+        hint = loss if problem and "sign error" in problem else hint
+        rep.case(name, detail, problem, hint + ". (ActionDist runs your exercise 2: it must pass "
+                 "check_ex2 first)")
+    rep.done(" (L and dL/dout agree with the reference, agent.ppo_loss)")
 
 
 # ---- ex5: one-alteration task sampling (sec 4.2) -------------------------------------------------
@@ -310,6 +401,7 @@ def as_goals(goals):
     return out
 
 
+@graded
 def check_ex5(alter, samples=400):
     """alter(goals, env, rng) -> a new goal dict: exactly one goal added or one goal modified."""
     rep = Report("ex5")
@@ -391,7 +483,7 @@ def check_ex5(alter, samples=400):
                 problem, hint = ("two runs with the same seed differ",
                                  "draw only from rng, not np.random or random")
         rep.case(name, detail, problem, hint)
-    return rep.done(f" ({samples} samples each: one alteration, both kinds, every block, "
+    rep.done(f" ({samples} samples each: one alteration, both kinds, every block, "
                     "the whole grid)")
 
 
@@ -427,20 +519,36 @@ def _trajectory(rng, n, T, goal_blocks, fall=False):
             s[b, :2] = 0.6, -0.475                       # off the edge, onto the catch floor
         states.append(s)
     goals = {int(b): (float(X_BINS[rng.integers(37)]), BLOCK_H / 2) for b in goal_blocks}
-    return taskexp.Trajectory(goals, np.stack(states), rng.integers(0, 6, (T, 3)), False)
+    return dict(goals=goals, states=np.stack(states), actions=rng.integers(0, 6, (T, 3)))
 
 
+def _make_select(n, K, seed):
+    """s0, sT and K candidates, each one alteration (taskexp.alter) of a one-goal task."""
+    rng = np.random.default_rng(seed)
+    s0, sT = _scene(rng, n), _scene(rng, n)
+    cands = [taskexp.alter({int(rng.integers(n)): (0.0, BLOCK_H / 2)}, tiny_env(n), rng)
+             for _ in range(K)]
+    return dict(s0=s0, sT=sT, cands=cands[:8] * 2 if K == 16 and seed % 2 else cands)
+
+
+def _make_relabel(n, T, blocks, fall, seed, still):
+    traj = _trajectory(np.random.default_rng(seed), n, T, blocks, fall)
+    if still:
+        traj["states"][1:, blocks[0]] = traj["states"][0, blocks[0]]   # the goal block stays
+    want = taskexp.relabel(taskexp.Trajectory(**traj, success=False), tiny_env(n))
+    return dict(traj=traj, want=want and dict(goals=want.goals, states=want.states,
+                                              actions=want.actions, success=want.success))
+
+
+@graded
 def check_ex6(select_goal, relabel):
     """select_goal(agent, s0, sT, candidates) -> index of g*;  relabel(traj, env) -> Trajectory
     or None."""
     rep, critic = Report("ex6"), DistanceCritic()
     for seed, K in enumerate([1, 2, 8, 8, 16, 16, 32]):
-        rng, n = np.random.default_rng(600 + seed), 4 + seed % 3
-        s0, sT = _scene(rng, n), _scene(rng, n)
-        cands = [taskexp.alter({int(rng.integers(n)): (0.0, BLOCK_H / 2)}, tiny_env(n), rng)
-                 for _ in range(K)]
-        if K == 16 and seed % 2:
-            cands = cands[:8] * 2                         # ties: argmax takes the first
+        n = 4 + seed % 3
+        c = case(f"ex6/select/{seed}", lambda: _make_select(n, K, 600 + seed))
+        s0, sT, cands = c["s0"], c["sT"], c["cands"]       # ties when K == 16 and seed is odd
         v0, vT = critic.value(np.stack([observation(s0, g) for g in cands])), critic.value(
             np.stack([observation(sT, g) for g in cands]))
         want = int(np.argmax(vT - v0))
@@ -462,13 +570,12 @@ def check_ex6(select_goal, relabel):
              ("a block fell off the table", 4, 3, [1], True)] + [
                  ("random", 4 + s % 3, 2 + s % 4, [s % 4], False) for s in range(8)]
     for seed, (name, n, T, blocks, fall) in enumerate(cases):
-        rng = np.random.default_rng(650 + seed)
-        traj = _trajectory(rng, n, T, blocks, fall)
         if seed == 6:
-            traj.states[1:, blocks[0]] = traj.states[0, blocks[0]]   # the goal block never moves
             name = "goal blocks end where they started"
-        want = taskexp.relabel(traj, tiny_env(n))
-        got, err = call(relabel, traj, tiny_env(n))
+        c = case(f"ex6/relabel/{seed}",
+                 lambda: _make_relabel(n, T, blocks, fall, 650 + seed, seed == 6))
+        want = c["want"]
+        got, err = call(relabel, taskexp.Trajectory(**c["traj"], success=False), tiny_env(n))
         hint = {True: fell, False: "the new goals are where traj.goals' blocks rest in s_T "
                 "(only those blocks); cut at the first t >= 1 where they hold: states[:t+1], "
                 "actions[:t], success=True; return None if they already hold at s_0 "
@@ -478,16 +585,17 @@ def check_ex6(select_goal, relabel):
                    f"expected {'None' if want is None else 'one'}")
         elif err is None and want is not None:
             try:
-                err = (f"goal blocks {sorted(got.goals)}, expected {sorted(want.goals)}"
-                       if sorted(got.goals) != sorted(want.goals) else
-                       first(*(diff(f"goals[{b}]", got.goals[b], want.goals[b])
-                               for b in want.goals),
-                             diff("states", got.states, want.states),
-                             diff("actions", got.actions, want.actions),
+                err = (f"goal blocks {sorted(got.goals)}, expected {sorted(want['goals'])}"
+                       if sorted(got.goals) != sorted(want["goals"]) else
+                       first(*(diff(f"goals[{b}]", got.goals[b], want["goals"][b])
+                               for b in want["goals"]),
+                             diff("states", got.states, want["states"]),
+                             diff("actions", got.actions, want["actions"]),
                              None if bool(got.success)
                              else f"success={got.success!r}, expected True"))
             except Exception as e:
                 err = f"the returned trajectory is malformed ({type(e).__name__}: {e})"
         rep.case(f"relabel, {name}", f"n={n}, T={T}, goal blocks {blocks}, seed {650 + seed}",
                  err, hint)
-    return rep.done(" (select_goal follows equation (1); relabel agrees with taskexp.relabel)")
+    rep.done(" (select_goal follows equation (1); relabel agrees with the reference, "
+             "taskexp.relabel)")

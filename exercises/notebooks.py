@@ -1,6 +1,5 @@
-"""exercises/notebooks.py -- load a student's notebook, release the student versions, and the CLI.
-~120 lines.  The notebooks follow nbgrader's conventions (cell metadata, solution markers) without
-needing nbgrader.
+"""exercises/notebooks.py -- load a student's notebook, their exercise 2's ActionDist, and the CLI.
+~190 lines.  The notebooks follow nbgrader's conventions (cell metadata, solution markers).
 """
 import glob
 import json
@@ -10,19 +9,16 @@ import re
 import sys
 
 from .behaviour import check_ex7
-from .checks import check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6
+from .checks import check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6, passes
+from .dist import student_action_dist
+from .problems import FUNCTIONS, NOTEBOOKS, POINTS
 
 NOTEBOOK_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                            "notebooks", "exercises")
-NOTEBOOKS = {"ex1": "ex1_mlp_backward.ipynb", "ex2": "ex2_logprob_entropy.ipynb",
-             "ex3": "ex3_gae.ipynb", "ex4": "ex4_ppo_loss.ipynb", "ex5": "ex5_alter.ipynb",
-             "ex6": "ex6_select_relabel.ipynb", "ex7": "ex7_base_policy.ipynb"}
-FUNCTIONS = {"ex1": ["mlp_backward"], "ex2": ["logp_entropy", "logp_entropy_backward"],
-             "ex3": ["gae"], "ex4": ["ppo_loss"], "ex5": ["alter"],
-             "ex6": ["select_goal", "relabel"], "ex7": ["mlp_backward", "gae", "ppo_loss"]}
-
+                            "notebooks", "exercises")       # the instructor notebooks
 CHECKS = dict(ex1=check_ex1, ex2=check_ex2, ex3=check_ex3, ex4=check_ex4, ex5=check_ex5,
               ex6=check_ex6, ex7=check_ex7)
+
+_loading = []         # the folders of the notebooks being loaded: action_dist() looks there
 
 
 def load(notebook):
@@ -31,31 +27,54 @@ def load(notebook):
     with open(notebook) as f:
         nb = json.load(f)
     ns = {"__name__": "__exercise__"}
-    for i, cell in enumerate(nb["cells"]):
-        meta = cell.get("metadata", {}).get("nbgrader", {})
-        if cell["cell_type"] == "code" and not (meta.get("grade") and not meta.get("solution")):
-            # no IPython magics
-            src = re.sub(r"^([ \t]*)([%!])", r"\1# \2", "".join(cell["source"]), flags=re.M)
-            name = f"{notebook} (cell {i})"
-            # tracebacks show the line
-            linecache.cache[name] = (len(src), None, src.splitlines(True), name)
-            exec(compile(src, name, "exec"), ns)
+    _loading.append(os.path.dirname(os.path.abspath(notebook)))
+    try:
+        for i, cell in enumerate(nb["cells"]):
+            meta = cell.get("metadata", {}).get("nbgrader", {})
+            if cell["cell_type"] == "code" and not (meta.get("grade") and not meta.get("solution")):
+                # no IPython magics
+                src = re.sub(r"^([ \t]*)([%!])", r"\1# \2", "".join(cell["source"]), flags=re.M)
+                name = f"{notebook} (cell {i})"
+                # tracebacks show the line
+                linecache.cache[name] = (len(src), None, src.splitlines(True), name)
+                exec(compile(src, name, "exec"), ns)
+    finally:
+        _loading.pop()
     return ns
 
 
-def functions(exercise, notebook=None):
-    """The student's functions for an exercise, from its notebook (ex7: from ex1, ex3, ex4's)."""
-    if exercise == "ex7":                          # notebook: ex7's notebook, or their folder
-        folder = notebook or NOTEBOOK_DIR
-        folder = folder if os.path.isdir(folder) else os.path.dirname(folder)
-        ns = {k: v for ex in ("ex1", "ex3", "ex4")
-              for k, v in load(os.path.join(folder, NOTEBOOKS[ex])).items()}
-    else:
-        ns = load(notebook or os.path.join(NOTEBOOK_DIR, NOTEBOOKS[exercise]))
+def _notebook(folder, exercise, needed_by):
+    path = os.path.join(folder, NOTEBOOKS[exercise])
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"{needed_by} needs your {exercise}, and there is no "
+                                f"{NOTEBOOKS[exercise]} in {os.path.abspath(folder)}")
+    return path
+
+
+def functions(exercise, notebook):
+    """The student's functions for an exercise, from their notebook. ex7: from the ex1-ex4
+    notebooks in the folder `notebook` (or the folder of that notebook): [mlp_backward, gae,
+    ppo_loss, ActionDist], the arguments of check_ex7."""
+    if exercise == "ex7":
+        folder = notebook if os.path.isdir(notebook) else os.path.dirname(notebook) or "."
+        ns = {}
+        for ex in ("ex1", "ex3", "ex4"):
+            ns.update(load(_notebook(folder, ex, "exercise 7")))
+        return [ns["mlp_backward"], ns["gae"], ns["ppo_loss"], action_dist(folder)]
+    ns = load(notebook)
     missing = [f for f in FUNCTIONS[exercise] if f not in ns]
     if missing:
         raise NameError(f"the notebook defines no {', '.join(missing)}")
     return [ns[f] for f in FUNCTIONS[exercise]]
+
+
+def action_dist(folder=None):
+    """The policy distribution of the student's exercise 2: agent.ActionDist's interface, run on
+    the functions of ex2_logprob_entropy.ipynb in `folder` (default: the folder of the notebook
+    being loaded, else the working directory, which in Jupyter is the notebook's)."""
+    folder = folder or (_loading[-1] if _loading else os.getcwd())
+    return student_action_dist(*functions("ex2", _notebook(folder, "ex2", "ActionDist")),
+                               where=f"exercise 2 ({NOTEBOOKS['ex2']})")
 
 
 def blank(source):
@@ -67,10 +86,9 @@ def blank(source):
                   source, flags=re.M | re.S)
 
 
-def release(out_dir, src_dir=NOTEBOOK_DIR):
-    """Write the student version of every exercise notebook: solutions blanked, outputs cleared."""
-    if os.path.realpath(out_dir) == os.path.realpath(src_dir):
-        raise ValueError(f"release would overwrite the instructor notebooks in {src_dir}")
+def write_notebooks(out_dir, student=True, src_dir=NOTEBOOK_DIR):
+    """Write every exercise notebook into out_dir, outputs cleared; student=True: each solution
+    blanked (the student version), False: as they are (the instructor version)."""
     os.makedirs(out_dir, exist_ok=True)
     written = []
     for path in sorted(glob.glob(os.path.join(src_dir, "ex*.ipynb"))):
@@ -78,7 +96,8 @@ def release(out_dir, src_dir=NOTEBOOK_DIR):
             nb = json.load(f)
         for cell in nb["cells"]:
             if cell["cell_type"] == "code":
-                cell["source"] = blank("".join(cell["source"])).splitlines(keepends=True)
+                if student:
+                    cell["source"] = blank("".join(cell["source"])).splitlines(keepends=True)
                 cell["outputs"], cell["execution_count"] = [], None
         written.append(os.path.join(out_dir, os.path.basename(path)))
         with open(written[-1], "w") as f:
@@ -87,38 +106,55 @@ def release(out_dir, src_dir=NOTEBOOK_DIR):
     return written
 
 
+USAGE = """usage: python -m exercises COMMAND
+  ex1 .. ex6 NOTEBOOK   check one exercise in your notebook, e.g. ex3 ex3_gae.ipynb
+  ex7 FOLDER            exercise 7: trains with the ex1-ex4 notebooks in FOLDER (e.g. .)
+  all FOLDER            check all seven notebooks in FOLDER, then the total
+  release OUT           (instructors) write the student kit into OUT
+  course DIR            (instructors) write an nbgrader course into DIR"""
+
+
+def check(exercise, notebook):
+    """Run one exercise's check on a notebook (ex7: a folder) -> passed (True/False); prints
+    PASS, or FAIL and what failed."""
+    try:
+        fns = functions(exercise, notebook)
+    except Exception as e:  # a broken notebook fails its exercise, not the run
+        print(f"{exercise} FAIL: could not run the notebook's cells: {type(e).__name__}: {e}")
+        return False
+    try:
+        return passes(CHECKS[exercise], *fns)
+    except Exception as e:  # a check the student's answer crashed still says FAIL
+        print(f"{exercise} FAIL: the check stopped: {type(e).__name__}: {e}")
+        return False
+
+
 def main(argv=None):
     cmd, *rest = (sys.argv[1:] if argv is None else argv) or [None]
-    lo, hi = (1, 2) if cmd == "release" else (0, 1)          # how many arguments follow the command
-    if cmd not in [*NOTEBOOKS, "all", "release"] or not lo <= len(rest) <= hi:
-        print("usage: python -m exercises "
-              "{ex1..ex7 [NOTEBOOK] | all [DIR] | release OUT_DIR [SRC_DIR]}", file=sys.stderr)
-        return 2
-    if cmd == "release":
+    if cmd in ("release", "course") and len(rest) == 1:
+        from .kit import course, release
         try:
-            for path in release(*rest):
-                print("wrote", path)
+            print(f"wrote {(release if cmd == 'release' else course)(rest[0])}")
         except ValueError as e:
             print(e, file=sys.stderr)
             return 2
         return 0
-    if cmd == "all":
-        todo = [(ex, os.path.join(rest[0] if rest else NOTEBOOK_DIR, NOTEBOOKS[ex]))
-                for ex in NOTEBOOKS]
-    else:
-        todo = [(cmd, rest[0] if rest else None)]
-    ok = []
-    for ex, nb in todo:
-        try:
-            fns = functions(ex, nb)
-        except Exception as e:  # a broken notebook fails its exercise, not the run
-            print(f"{ex} FAIL: could not run the notebook's cells: {type(e).__name__}: {e}")
-            ok.append(False)
-            continue
-        try:
-            ok.append(CHECKS[ex](*fns))
-        except Exception as e:  # a check the student's answer crashed still says FAIL
-            print(f"{ex} FAIL: the check stopped: {type(e).__name__}: {e}")
-            ok.append(False)
-    return 0 if all(ok) else 1
-
+    if cmd in [*NOTEBOOKS, "all"] and not rest:
+        what = ("the folder of your notebooks" if cmd in ("all", "ex7") else
+                f"your notebook, e.g. {NOTEBOOKS[cmd]}")
+        print(f"which {'folder' if cmd in ('all', 'ex7') else 'notebook'}? "
+              f"python -m exercises {cmd} PATH, with PATH {what} ('.' in the student kit's "
+              "folder)", file=sys.stderr)
+        return 2
+    if cmd not in [*NOTEBOOKS, "all"] or len(rest) != 1:
+        print(USAGE, file=sys.stderr)
+        return 2
+    if cmd != "all":
+        return 0 if check(cmd, rest[0]) else 1
+    passed = {ex: check(ex, os.path.join(rest[0], NOTEBOOKS[ex]) if ex != "ex7" else rest[0])
+              for ex in NOTEBOOKS}
+    points = sum(POINTS[ex] for ex, ok in passed.items() if ok)
+    print(f"total: {points}/{sum(POINTS.values())} points; {sum(passed.values())} of "
+          f"{len(passed)} exercises pass" + ("" if all(passed.values()) else
+          f" (fail: {', '.join(ex for ex, ok in passed.items() if not ok)})"))
+    return 0 if all(passed.values()) else 1

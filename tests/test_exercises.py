@@ -3,20 +3,26 @@ to fail.
 
 Every reference solution passes its check (the library's and the instructor notebooks'); every
 released stub fails it; plausible wrong answers -- a sign error, a missing mask, an off-by-one in
-GAE, ... -- fail it with a hint that names the mistake.  Also: the CLI, the release script, and
-the instructor notebooks run top to bottom (ex7, the behavioural check, runs twice: ~1-2 min)."""
+GAE, ... -- fail it with a hint that names the mistake, in the message of an AssertionError.  Also:
+the student's ActionDist (exercise 2) behaves as the library's, the checks write nothing to stderr,
+the CLI, and the instructor notebooks run top to bottom. tests/test_kit.py tests the student kit,
+tests/test_grader.py grades with nbgrader."""
 import copy
 import json
 import os
 import re
+import shutil
 import subprocess
 import sys
 
+import nbclient
+import nbformat
 import numpy as np
 import pytest
 
 import agent
 import exercises
+import exercises.kit
 import taskexp
 from env2d import is_success
 
@@ -25,14 +31,21 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(exercises.__file__)))   #
 SIMPLE = ["ex1", "ex2", "ex3", "ex4", "ex5", "ex6"]          # all but the behavioural ex7
 
 
+def instructor(ex):
+    return os.path.join(exercises.NOTEBOOK_DIR, exercises.NOTEBOOKS[ex])
+
+
 def run_check(ex, *fns):
-    return exercises.CHECKS[ex](*fns)
+    """True if the check passes; False if it raises AssertionError (its message printed)."""
+    return exercises.passes(exercises.CHECKS[ex], *fns)
 
 
 @pytest.fixture(scope="module")
 def released(tmp_path_factory):
+    """The student kit (its notebooks are the released ones; this process checks them with the
+    repository's exercises package, on the full library)."""
     out = tmp_path_factory.mktemp("release")
-    exercises.release(str(out))
+    exercises.kit.release(str(out))
     return out
 
 
@@ -46,7 +59,7 @@ def test_library_reference_passes(ex, capsys):
 
 @pytest.mark.parametrize("ex", SIMPLE)
 def test_instructor_notebook_solution_passes(ex):
-    assert run_check(ex, *exercises.functions(ex))
+    assert run_check(ex, *exercises.functions(ex, instructor(ex)))
 
 
 @pytest.mark.parametrize("ex", SIMPLE + ["ex7"])
@@ -232,23 +245,25 @@ def test_wrong_answer_fails_with_a_hint(name, capsys):
 
 def test_ex7_sign_error_in_ppo_fails(capsys):
     """The behavioural check measures PPO's gain: a sign-flipped loss (which makes BC's policy
-    worse) must fail it.  One training run (~30-60 s)."""
-    assert not exercises.check_ex7(R["mlp_backward"], R["gae"], ppo_variant(sign=-1.0))
+    worse) must fail it.  One training run (~15-60 s)."""
+    assert not run_check("ex7", R["mlp_backward"], R["gae"], ppo_variant(sign=-1.0))
     assert "after PPO" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("piece", ["mlp_backward", "gae", "ppo_loss"])
+@pytest.mark.parametrize("piece", ["mlp_backward", "gae", "ppo_loss", "dist"])
 def test_ex7_trains_with_the_students_functions(piece, monkeypatch):
-    """Exercise 7 hands the student's functions to the training code: a student's function that
-    raises stops training, and the library's module globals are never touched."""
+    """Exercise 7 hands the student's functions (and ActionDist) to the training code: a
+    student's function that raises stops training, and the library's module globals are never
+    touched."""
     def boom(*args, **kwargs):
         raise RuntimeError(f"the student's {piece} was called")
-    library = agent.mlp_backward, agent.gae, agent.ppo_loss, taskexp.Pieces()
+    library = agent.mlp_backward, agent.gae, agent.ppo_loss, agent.ActionDist, taskexp.Pieces()
     monkeypatch.setitem(exercises.EX7, "demos", 50)
     monkeypatch.setitem(exercises.EX7, "ppo_steps", 200)
     with pytest.raises(RuntimeError, match=f"student's {piece} was called"):
         exercises.base_policy_success(**{piece: boom})
-    assert (agent.mlp_backward, agent.gae, agent.ppo_loss, taskexp.Pieces()) == library
+    assert (agent.mlp_backward, agent.gae, agent.ppo_loss, agent.ActionDist,
+            taskexp.Pieces()) == library
 
 
 def test_ex5_takes_numpy_positions(capsys):
@@ -260,17 +275,73 @@ def test_ex5_takes_numpy_positions(capsys):
     def alter_numpy_in_place(goals, env, rng):
         goals.update(alter_numpy(goals, env, rng))
         return goals
-    assert exercises.check_ex5(alter_numpy)
-    assert not exercises.check_ex5(alter_numpy_in_place)
+    assert run_check("ex5", alter_numpy)
+    assert not run_check("ex5", alter_numpy_in_place)
     assert "dict(goals)" in capsys.readouterr().out
 
 
 def test_checks_are_deterministic(capsys):
     for _ in range(2):
-        exercises.check_ex3(gae_variant(shift=1))
-        exercises.check_ex5(alter_always_add)
+        run_check("ex3", gae_variant(shift=1))
+        run_check("ex5", alter_always_add)
     out = capsys.readouterr().out.splitlines()
     assert out[: len(out) // 2] == out[len(out) // 2:]
+
+
+
+def test_a_failed_check_raises_an_assertion_error_that_says_what_failed():
+    with pytest.raises(AssertionError) as failed:
+        exercises.check_ex3(gae_variant(shift=1))
+    message = str(failed.value)
+    assert message.startswith("ex3 FAIL: case 'terminations'") and "hint:" in message, message
+    assert exercises.check_ex3(R["gae"]) is None       # None, not True: nbgrader reads a cell's
+    #                                                    value as partial credit
+
+
+def test_checks_write_nothing_to_stderr(capsys):
+    """nbgrader gives 0 points to a graded cell with stderr output: a student's warnings and
+    prints to stderr come out on stdout, as a note, and a right answer still passes."""
+    def noisy_gae(*args):
+        print("debugging", file=sys.stderr)
+        np.exp(np.array([1000.0]))                            # RuntimeWarning: overflow
+        return R["gae"](*args)
+    assert run_check("ex3", noisy_gae)
+    out, err = capsys.readouterr()
+    assert err == "" and "ex3 PASS" in out and "debugging" in out, (out, err)
+    assert "note:" in out and "RuntimeWarning: overflow" in out, out
+
+
+# ---- the student's ActionDist (exercise 2), which exercises 4 and 7 use -------------------------
+
+def test_student_action_dist_behaves_as_the_library_s():
+    Dist = exercises.student_action_dist(R["logp_entropy"], R["logp_entropy_backward"],
+                                         R["log_softmax"])
+    rng = np.random.default_rng(5)
+    out = rng.standard_normal((7, 4, 1 + 5 + 4)).astype(np.float32)      # float32 as a net may
+    actions = np.stack([rng.integers(4, size=7), rng.integers(5, size=7),
+                        rng.integers(4, size=7)], 1)
+    mine, lib = Dist(out, 5), agent.ActionDist(out, 5)
+    assert np.allclose(mine.log_prob(actions), lib.log_prob(actions))
+    assert np.allclose(mine.entropy(), lib.entropy())
+    a, c = rng.standard_normal(7), rng.standard_normal(7)
+    assert np.allclose(mine.backward(actions, a, c), lib.backward(actions, a, c))
+    assert np.allclose(mine.backward(actions, -0.5, 0.0), lib.backward(actions, -0.5, 0.0))
+    assert (mine.sample(np.random.default_rng(1)) == lib.sample(np.random.default_rng(1))).all()
+    assert (mine.mode() == lib.mode()).all()
+
+
+def test_ex4_says_when_its_action_dist_needs_exercise_2():
+    """A right ppo_loss whose ActionDist runs an unfinished exercise 2 fails, naming exercise 2
+    rather than saying the student's ppo_loss is not done."""
+    def stub(*args):
+        raise NotImplementedError()
+    Dist = exercises.student_action_dist(stub, stub, stub, where="exercise 2 (ex2_x.ipynb)")
+
+    def ppo_loss(out, actions, logp_old, adv, n_x, clip=0.2, ent_coef=0.0):
+        dist = Dist(out, n_x)
+        return dist.entropy().mean(), dist.backward(actions, adv, 0.0)
+    with pytest.raises(AssertionError, match=r"ActionDist runs your exercise 2 \(ex2_x.ipynb\)"):
+        exercises.check_ex4(ppo_loss)
 
 
 # ---- release and CLI -----------------------------------------------------------------------------
@@ -308,25 +379,59 @@ def test_blank_keeps_the_indentation():
                                     "    raise NotImplementedError()\n")
 
 
-def cli(*args):
+def cli(*args, cwd=ROOT):
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return subprocess.run([sys.executable, "-m", "exercises", *args], cwd=ROOT, env=env,
+    return subprocess.run([sys.executable, "-m", "exercises", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=300)
 
 
 def test_cli_passes_on_the_instructor_notebook_and_fails_on_a_stub(released):
-    ok = cli("ex3")
+    ok = cli("ex3", instructor("ex3"))
     assert ok.returncode == 0 and "ex3 PASS" in ok.stdout, ok.stdout + ok.stderr
     bad = cli("ex3", str(released / exercises.NOTEBOOKS["ex3"]))
     assert bad.returncode == 1 and "ex3 FAIL" in bad.stdout and "NotImplementedError" in bad.stdout
     assert cli("ex9").returncode == 2 and cli().returncode == 2
 
 
-def test_cli_release(tmp_path):
-    res = cli("release", str(tmp_path))
-    assert res.returncode == 0
-    assert sorted(os.listdir(tmp_path)) == sorted(exercises.NOTEBOOKS.values())
-    assert cli("release", exercises.NOTEBOOK_DIR).returncode == 2         # never over the solutions
+@pytest.mark.parametrize("cmd", ["ex3", "ex7", "all"])
+def test_cli_without_a_path_asks_which_notebook(cmd):
+    """Not the instructor's notebook in the repository: the student's."""
+    res = cli(cmd)
+    assert res.returncode == 2 and res.stdout == "", res.stdout
+    assert res.stderr.startswith("which notebook?" if cmd == "ex3" else "which folder?")
+
+
+def mixed_folder(folder, blank, released):
+    """The instructor notebooks, except the exercises in `blank`: the released stubs."""
+    for ex, name in exercises.NOTEBOOKS.items():
+        shutil.copy(released / name if ex in blank else instructor(ex), folder / name)
+    return folder
+
+
+def test_cli_all_ends_with_the_total_and_ex7_names_what_is_missing(released, tmp_path):
+    """ex4 not done: ex4 fails, and so does ex7 before training, naming ex4 and nothing else."""
+    res = cli("all", str(mixed_folder(tmp_path, ["ex4"], released)))
+    lines = res.stdout.strip().splitlines()
+    assert res.returncode == 1
+    assert lines[-1] == "total: 11/16 points; 5 of 7 exercises pass (fail: ex4, ex7)", lines[-1]
+    ex7 = res.stdout[res.stdout.index("ex7 FAIL"):]
+    assert "not done yet" in ex7 and "ex4 (ppo_loss in ex4_ppo_loss.ipynb)" in ex7, ex7
+    assert not any(f"{ex} (" in ex7 for ex in ["ex1", "ex2", "ex3"]), ex7
+    assert "BC on" not in res.stdout                      # no minute of training for nothing
+
+
+def test_ex7_says_that_exercise_2_is_missing_through_ex4(released, tmp_path):
+    """ex2 not done: exercise 4's ppo_loss runs it (its ActionDist), so ex7 names ex2, not ex4."""
+    fns = exercises.functions("ex7", str(mixed_folder(tmp_path, ["ex2"], released)))
+    assert exercises.unfinished(*fns) == ["ex2"]
+
+
+def test_points_are_those_of_the_graded_cells():
+    for ex, name in exercises.NOTEBOOKS.items():
+        with open(instructor(ex)) as f:
+            cells = json.load(f)["cells"]
+        assert [c["metadata"]["nbgrader"]["points"] for c in cells
+                if c["metadata"]["nbgrader"]["grade"]] == [exercises.POINTS[ex]], name
 
 
 GAE_BY_SUMS = """
@@ -366,8 +471,6 @@ def test_a_student_who_fills_in_a_different_correct_answer_passes(released, tmp_
 
 @pytest.mark.parametrize("ex", list(exercises.NOTEBOOKS))
 def test_instructor_notebook_executes(ex):
-    nbformat = pytest.importorskip("nbformat")
-    nbclient = pytest.importorskip("nbclient")
     path = os.path.join(exercises.NOTEBOOK_DIR, exercises.NOTEBOOKS[ex])
     nb = nbformat.read(path, as_version=4)
     nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
