@@ -1,0 +1,135 @@
+"""The real grader: nbgrader (a dev dependency: if it is missing these tests fail, they do not
+skip), run as an instructor would, on the course that `python -m exercises course` writes.
+
+    nbgrader generate_assignment taskexp     on the instructor notebooks (source/taskexp/)
+    nbgrader autograde taskexp               on three submissions, copies of release/taskexp/:
+        reference   every solution cell pasted from the instructor notebooks: 16/16, ex7 included
+        blank       the release as it is: 0/16
+        wrong       the reference with select_goal = argmax V(s_T, g) (end2new, equation 1 without
+                    its first term): loses ex6's 2 points and nothing else
+
+nbclient, which tests/test_exercises.py uses, executes notebooks but does not grade: nbgrader
+gives 0 points to a graded cell that writes to stderr, stops a cell after its timeout, and grades
+in the student's folder. About a minute and a half on two cores: 21 kernels, ex7 trains twice.
+"""
+import json
+import os
+import shutil
+import subprocess
+import sys
+
+import nbgrader  # noqa: F401  (the dev dependency: an ImportError here fails, it does not skip)
+import pytest
+from nbgrader.api import Gradebook
+
+import exercises
+import exercises.kit as kit
+
+POINTS = exercises.POINTS
+WRONG = ("return int(np.argmax(v_T - v_0))", "return int(np.argmax(v_T))")      # in ex6
+
+
+def nbgrader_cmd(root, *args):
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    res = subprocess.run([sys.executable, "-m", "nbgrader", *args], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, f"nbgrader {' '.join(args)}:\n{res.stdout}\n{res.stderr[-3000:]}"
+    return res
+
+
+@pytest.fixture(scope="module")
+def course(tmp_path_factory):
+    """The course after generate_assignment and autograde -> (root, {student: {ex: points}})."""
+    root = tmp_path_factory.mktemp("course")
+    kit.course(str(root))
+    nbgrader_cmd(root, "generate_assignment", "taskexp")
+    release = root / "release" / "taskexp"
+    for student in ("reference", "blank", "wrong"):
+        shutil.copytree(release, root / "submitted" / student / "taskexp")
+    for student in ("reference", "wrong"):
+        kit.paste_solutions(root / "submitted" / student / "taskexp")
+    ex6 = root / "submitted" / "wrong" / "taskexp" / exercises.NOTEBOOKS["ex6"]
+    text = ex6.read_text()
+    assert text.count(WRONG[0]) == 1
+    ex6.write_text(text.replace(WRONG[0], WRONG[1]))
+    nbgrader_cmd(root, "autograde", "taskexp")
+    scores = {}
+    with Gradebook(f"sqlite:///{root / 'gradebook.db'}") as gb:
+        for student in ("reference", "blank", "wrong"):
+            sub = gb.find_submission("taskexp", student)
+            assert sub.max_score == sum(POINTS.values()) == 16
+            scores[student] = {nb.name[:3]: nb.score for nb in sub.notebooks}
+    return root, scores
+
+
+def test_reference_solutions_get_full_marks(course):
+    assert course[1]["reference"] == POINTS
+
+
+def test_blank_release_gets_nothing(course):
+    assert course[1]["blank"] == {ex: 0 for ex in POINTS}
+
+
+def test_a_wrong_answer_loses_exactly_its_exercise(course):
+    assert course[1]["wrong"] == {**POINTS, "ex6": 0}
+
+
+def graded_outputs(path):
+    with open(path) as f:
+        return [o for c in json.load(f)["cells"] if c["metadata"].get("nbgrader", {}).get("grade")
+                for o in c.get("outputs", [])]
+
+
+def test_graded_cells_write_nothing_to_stderr_and_fail_with_a_message(course):
+    root = course[0]
+    for name in exercises.NOTEBOOKS.values():
+        outputs = graded_outputs(root / "autograded" / "reference" / "taskexp" / name)
+        assert outputs and not [o for o in outputs if o.get("name") == "stderr"
+                                or o["output_type"] == "error"], (name, outputs)
+    errors = [o for o in graded_outputs(root / "autograded" / "wrong" / "taskexp" /
+                                        exercises.NOTEBOOKS["ex6"]) if o["output_type"] == "error"]
+    assert errors[0]["ename"] == "AssertionError"
+    assert errors[0]["evalue"].startswith("ex6 FAIL: case 'select_goal") and \
+        "end2new" in errors[0]["evalue"], errors[0]["evalue"]
+    blank7 = graded_outputs(root / "autograded" / "blank" / "taskexp" /
+                            exercises.NOTEBOOKS["ex7"])
+    assert "not done yet" in blank7[-1]["evalue"], blank7
+
+
+def test_nbgrader_release_is_the_student_kit(course, tmp_path):
+    """generate_assignment writes the same files as `python -m exercises release`, with the
+    same code in every notebook, and no answer."""
+    root, mine = course[0] / "release" / "taskexp", kit.release(str(tmp_path / "kit"))
+    files = lambda top: sorted(os.path.relpath(os.path.join(d, f), top)
+                               for d, _, fs in os.walk(top) for f in fs)
+    assert files(root) == files(mine)
+    for name in files(mine):
+        if name.endswith(".ipynb"):
+            code = lambda top: [c["source"] for c in json.load(open(os.path.join(top, name)))
+                                ["cells"]]
+            assert ["".join(s) for s in code(root)] == ["".join(s) for s in code(mine)], name
+        elif name != os.path.join("exercises", "vectors.json"):
+            assert open(os.path.join(root, name)).read() == \
+                open(os.path.join(mine, name)).read(), name
+    assert kit.answers_in(root) == []
+
+
+def test_config_stops_nbgrader_when_the_kernel_cannot_import_the_course(tmp_path):
+    """Without this, every cell fails on an import and autograde exits 0 with 0 points. Here the
+    python3 kernel is a fresh virtual environment without the requirements."""
+    subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(tmp_path / "venv")],
+                   check=True)
+    python = str(tmp_path / "venv" / ("Scripts" if os.name == "nt" else "bin") / "python")
+    spec = tmp_path / "jupyter" / "kernels" / "python3"
+    spec.mkdir(parents=True)
+    (spec / "kernel.json").write_text(json.dumps(dict(
+        argv=[python, "-m", "ipykernel_launcher", "-f", "{connection_file}"],
+        display_name="Python 3 (no requirements)", language="python")))
+    root = tmp_path / "course"
+    kit.course(str(root))
+    res = subprocess.run([sys.executable, "-m", "nbgrader", "generate_assignment", "taskexp"],
+                         cwd=root, env=dict(os.environ, JUPYTER_PATH=str(tmp_path / "jupyter")),
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode != 0 and not (root / "release").exists()
+    assert f"the grading kernel's Python ({python}) cannot import the course" in res.stderr
+    assert "No module named 'numpy'" in res.stderr and "pip install -r" in res.stderr, res.stderr
