@@ -231,7 +231,7 @@ WHAT = {"ex1": "the MLP backward pass", "ex2": "log-probability and entropy of t
         "and their gradients", "ex3": "generalised advantage estimation (GAE)",
         "ex4": "PPO's clipped loss and its gradient", "ex5": "one-alteration task sampling "
         "(sec 4.2)", "ex6": "goal selection by equation (1), hindsight relabelling",
-        "ex7": "nothing new: your ex1-ex4 train the base policy (about a minute)"}
+        "ex7": "nothing new: your ex1-ex4 train the base policy (15 s to a minute)"}
 
 README = """# Task expansion from the inside: the student kit
 
