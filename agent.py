@@ -333,9 +333,10 @@ def _categorical(p, rng):
 
 # ---- Losses with their gradients w.r.t. the network outputs ------------------------------
 
-def bc_loss(out, actions, n_x):
-    """L_BC = -mean log pi(a | s, g)  -> (L, dL/d out (B, n, D))."""
-    dist = ActionDist(out, n_x)
+def bc_loss(out, actions, n_x, action_dist=None):
+    """L_BC = -mean log pi(a | s, g)  -> (L, dL/d out (B, n, D)).  action_dist: the
+    distribution's class (default ActionDist)."""
+    dist = (action_dist or ActionDist)(out, n_x)
     B = len(actions)
     return -dist.log_prob(actions).mean(), dist.backward(actions, -1.0 / B, 0.0)
 
@@ -391,15 +392,16 @@ def gae(rewards, values, terminated, truncated, next_values, gamma, lam):
 class Agent:
     """Policy pi(b, x, y | s, g) and value V(s, g), two SetNets with separate Adam states.
 
-    mlp_backward(params, hs, dout) -> (grads, dx) is the backward pass of every MLP in them: the
-    library's by default, or a student's (exercise 7 trains with it).
+    mlp_backward(params, hs, dout) -> (grads, dx) is the backward pass of every MLP in them, and
+    action_dist the class of the policy's distribution (default ActionDist): the library's, or a
+    student's (exercise 7 trains with them).
     """
 
     def __init__(self, n_blocks=6, n_x=37, n_y=None, hidden=128, seed=0, mlp_backward=mlp_backward,
-                 dtype="float64"):
+                 dtype="float64", action_dist=None):
         self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
         self.n_y = self.n_blocks if n_y is None else int(n_y)
-        self.dtype = np.dtype(dtype)
+        self.dtype, self.action_dist = np.dtype(dtype), action_dist or ActionDist
         if self.dtype not in (np.float32, np.float64):
             raise ValueError(f"dtype {dtype!r}: the networks compute in float32 or float64")
         F = featurize(np.zeros((1, self.n_blocks, 6)), self.n_y).shape[-1]
@@ -425,7 +427,7 @@ class Agent:
         """obs (n, 6) -> action (3,) int64, or (B, n, 6) -> (B, 3).  Samples with rng (default:
         the agent's own seeded Generator), or takes the joint mode when deterministic."""
         obs, single = self._batched(obs)
-        dist = ActionDist(self.actor.forward(self.features(obs)), self.n_x)
+        dist = self.action_dist(self.actor.forward(self.features(obs)), self.n_x)
         a = dist.mode() if deterministic else dist.sample(self.rng if rng is None else rng)
         return a[0] if single else a
 
@@ -439,7 +441,7 @@ class Agent:
     def sample(self, obs, rng=None):
         """obs (B, n, 6) -> actions (B, 3) int64, logp (B,), values (B,)  (for rollouts)."""
         f = self.features(obs)
-        dist = ActionDist(self.actor.forward(f), self.n_x)
+        dist = self.action_dist(self.actor.forward(f), self.n_x)
         a = dist.sample(self.rng if rng is None else rng)
         return a, dist.log_prob(a), self.critic.forward(f)[..., 0].mean(-1)
 
@@ -450,7 +452,7 @@ class Agent:
         """
         actions = np.asarray(actions, dtype=np.int64)
         self._check_actions(actions)
-        loss = lambda out, a: bc_loss(out, a, self.n_x)
+        loss = lambda out, a: bc_loss(out, a, self.n_x, self.action_dist)
         return self._fit("BC", self.actor, self.actor_opt, loss, obs, actions, epochs,
                          batch_size, lr, rng, max_grad_norm)
 

@@ -30,7 +30,7 @@ recorded cases (vectors.py); exercise 4 and 7 use the student's exercise 2 (acti
 checks.py (ex1-ex6), behaviour.py (ex7), dist.py (ActionDist from ex2), notebooks.py (loader,
 CLI), kit.py (kit, course), vectors.py (recorded cases), problems.py (notebooks, points).
 """
-from .behaviour import EX7, StudentAgent, base_policy_success, check_ex7, student_pieces, unfinished
+from .behaviour import EX7, base_policy_success, check_ex7, student_pieces, unfinished
 from .checks import (
                      REFERENCE,
                      DistanceCritic,

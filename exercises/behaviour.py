@@ -28,38 +28,6 @@ EX7 = dict(seed=0, n_blocks=4, hidden=64, demos=3000, bc_epochs=8, ppo_steps=300
            threshold=0.40, min_gain=0.20)
 
 
-class StudentAgent(agent.Agent):
-    """agent.Agent whose policy distribution is `dist` (the student's, exercise 2) wherever the
-    library's uses agent.ActionDist: acting, sampling and behaviour cloning. agent.Agent takes
-    the MLP backward pass as a parameter but not the distribution, so these three methods are
-    agent.Agent's with ActionDist replaced by self.dist."""
-
-    def __init__(self, *args, dist, **kwargs):
-        super().__init__(*args, **kwargs)
-        self.dist = dist
-
-    def act(self, obs, deterministic=False, rng=None):
-        obs, single = self._batched(obs)
-        d = self.dist(self.actor.forward(self.features(obs)), self.n_x)
-        a = d.mode() if deterministic else d.sample(self.rng if rng is None else rng)
-        return a[0] if single else a
-
-    def sample(self, obs, rng=None):
-        f = self.features(obs)
-        d = self.dist(self.actor.forward(f), self.n_x)
-        a = d.sample(self.rng if rng is None else rng)
-        return a, d.log_prob(a), self.critic.forward(f)[..., 0].mean(-1)
-
-    def bc(self, obs, actions, epochs, batch_size, lr, rng, max_grad_norm=None):
-        def bc_loss(out, a):                  # agent.bc_loss: L = -mean log pi(a | s, g)
-            d = self.dist(out, self.n_x)
-            return -d.log_prob(a).mean(), d.backward(a, -1.0 / len(a), 0.0)
-        actions = np.asarray(actions, dtype=np.int64)
-        self._check_actions(actions)
-        return self._fit("BC", self.actor, self.actor_opt, bc_loss, obs, actions, epochs,
-                         batch_size, lr, rng, max_grad_norm)
-
-
 def student_pieces(gae=None, ppo_loss=None, mlp_backward=None, dist=None):
     """taskexp.Pieces with the student's functions where given (the library's elsewhere), for
     the training code to call. The student's ppo_loss returns (L, dL/dout); the library's also
@@ -99,9 +67,8 @@ def base_policy_success(gae=None, ppo_loss=None, mlp_backward=None, dist=None, s
     greedy = lambda ag: taskexp.success_rate(taskexp.run_episodes(ag, held_out, envs,
                                                                   deterministic=True))
     pieces = student_pieces(gae, ppo_loss, mlp_backward, dist)
-    kind, extra = (agent.Agent, {}) if dist is None else (StudentAgent, dict(dist=dist))
-    ag = kind(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, seed=seed,
-              mlp_backward=pieces.mlp_backward, **extra)
+    ag = agent.Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, seed=seed,
+                     mlp_backward=pieces.mlp_backward, action_dist=dist)
     ag.bc(obs, actions, c["bc_epochs"], cfg.bc_batch, cfg.bc_lr, rng)
     before = greedy(ag)
     taskexp.ppo_phase(ag, tasks, cfg, envs, envs, rng, "PPO with your gae and ppo_loss",
