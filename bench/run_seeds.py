@@ -3,8 +3,10 @@
     python bench/run_seeds.py --seeds 0 1 2                       # ours, default budget
     python bench/run_seeds.py --seeds 0 1 2 --variants ours direct-ppo end2new init2new no-restrict
 
-Each run is a separate `taskexp.py` process writing runs/bench/<variant>-seed<k>; two run at a time
-(one per core, each pinned to one BLAS thread). Prints a markdown table per variant and round.
+Each run is a separate `taskexp.py` process (one worker: two runs at a time use the two cores)
+writing the directory `taskexp.py` would choose itself, runs/<variant>-seed<k> (no-restrict:
+runs/ours-norestrict-seed<k>), where the notebooks look for them. Prints a markdown table per
+variant and round.
 """
 import argparse
 import json
@@ -21,12 +23,15 @@ FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"]}
 
 
+DIRS = {"no-restrict": "ours-norestrict"}       # as taskexp.py names its default directories
+
+
 def run_one(variant, seed, rounds, root, extra_args):
     """Finished runs are reused, stopped ones resumed (same results as if never stopped)."""
-    out = os.path.join(root, f"{variant}-seed{seed}")
+    out = os.path.join(root, f"{DIRS.get(variant, variant)}-seed{seed}")
     done = cli.saved_round(out)
     if done < rounds:
-        cmd = [sys.executable, "-m", "cli", "--rounds", str(rounds), "--out", out]
+        cmd = [sys.executable, "-m", "cli", "--rounds", str(rounds), "--out", out, "--workers", "1"]
         cmd += ["--resume"] if done >= 0 else ["--seed", str(seed), *FLAGS[variant], *extra_args]
         with open(out + ".log", "a" if done >= 0 else "w") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
@@ -39,7 +44,7 @@ def main():
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--variants", nargs="+", choices=list(FLAGS), default=["ours"])
     p.add_argument("--rounds", type=int, default=3)
-    p.add_argument("--root", default=os.path.join("runs", "bench"))
+    p.add_argument("--root", default="runs")
     p.add_argument("--jobs", type=int, default=2)
     p.add_argument("--scale", default=None, help="passed to taskexp.py (smaller budgets)")
     a = p.parse_args()
@@ -48,6 +53,7 @@ def main():
     jobs = [(v, s) for v in a.variants for s in a.seeds]
     with ThreadPoolExecutor(a.jobs) as pool:
         done = list(pool.map(lambda vs: run_one(*vs, a.rounds, a.root, extra_args), jobs))
+    summary = []
     for variant in a.variants:
         res = [r for v, _, r in done if v == variant]
         shapes = list(res[0]["rounds"][0]["eval"])
@@ -55,14 +61,34 @@ def main():
         print("| round | " + " | ".join(shapes) + " | wall-clock (s) |")
         print("|---" * (len(shapes) + 2) + "|")
         for k in range(a.rounds + 1):
-            cells = []
-            for s in shapes:
-                v = 100 * np.array([r["rounds"][k]["eval"][s] for r in res])
-                cells.append(f"{v.mean():.0f} +- {v.std():.0f}%")
-            t = np.array([r["wallclock"]["total_s"] for r in res]) if k == a.rounds else None
-            print(f"| {k} | " + " | ".join(cells)
-                  + f" | {'' if t is None else f'{t.mean():.0f} +- {t.std():.0f}'} |")
+            cells = [pm([100 * r["rounds"][k]["eval"][s] for r in res], "%") for s in shapes]
+            t = [r["wallclock"]["total_s"] for r in res] if k == a.rounds else None
+            print(f"| {k} | " + " | ".join(cells) + f" | {'' if t is None else pm(t)} |")
+        last = [100 * np.mean(list(r["rounds"][a.rounds]["eval"].values())) for r in res]
+        summary.append((variant, pm(last, "%")))
+        if not all("tasks" in r["rounds"][k] for r in res for k in range(1, a.rounds + 1)):
+            continue                                 # direct PPO generates no tasks
+        print(f"\n{variant}: generated tasks (Table 1, Figure 1), mean +- std over seeds")
+        print("| round | tasks | high-goal tasks (>= 3 above ground) | mean episode length "
+              "| mean highest goal layer |")
+        print("|---|---|---|---|---|")
+        for k in range(a.rounds + 1):
+            rows = [r["rounds"][k] for r in res]
+            layer = [np.average(np.arange(len(w["max_height_hist"])), weights=w["max_height_hist"])
+                     if sum(w["max_height_hist"]) else 0.0 for w in rows]
+            print(f"| {k} | {pm([w['tasks'] for w in rows])} | "
+                  f"{pm([w['high_goal_tasks'] for w in rows])} | "
+                  f"{pm([w['mean_episode_length'] for w in rows], '', 2)} | {pm(layer, '', 2)} |")
+    print(f"\nround {a.rounds}, mean over the shapes, mean +- std over seeds {a.seeds}")
+    print("| variant | success |\n|---|---|")
+    for variant, cell in summary:
+        print(f"| {variant} | {cell} |")
 
+
+def pm(values, unit="", digits=0):
+    """mean +- std of values, as text."""
+    v = np.asarray(values, float)
+    return f"{v.mean():.{digits}f} +- {v.std():.{digits}f}{unit}"
 
 if __name__ == "__main__":
     main()
