@@ -118,7 +118,8 @@ def saved_results(out):
             else:
                 with np.load(path, allow_pickle=False) as z:
                     results = json.loads(str(z["results"]))
-            results["rounds"][-1]["round"], Config(**results["config"])
+            results["rounds"][-1]["round"]           # a KeyError or IndexError: no round done
+            Config(**results["config"])              # a TypeError: not settings of this code
             return results, None
         except FileNotFoundError:
             why.append(f"no {name}")
