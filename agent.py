@@ -13,6 +13,7 @@ and the same learning); losses, log-probs and returns are always float64.
 Randomness only through a passed np.random.Generator (or an integer seed for initialisation).
 """
 import json
+import math
 import os
 import zipfile
 
@@ -248,6 +249,230 @@ class SetNet:
                 **{f"rho.{k}": v for k, v in g_rho.items()}}
 
 
+# ---- Self-attention over blocks: the paper's network (sec 3), an option for now --------------
+#
+# A transformer encoder over block tokens, as in the authors' code: every block looks at every
+# other block, so relations such as "a block rests under my goal" can be learned instead of
+# computed by hand (featurize's RELATIONS). Agent(network="attention") uses it in place of SetNet;
+# it becomes the default once it learns as well (an open issue). No positional encoding: it is
+# permutation-equivariant over the blocks, as SetNet is.
+
+def softmax(s):
+    """p = exp(s - max s) / sum exp(s - max s) over the last axis (the max keeps exp finite)."""
+    e = np.exp(s - s.max(-1, keepdims=True))
+    return e / e.sum(-1, keepdims=True)
+
+
+def softmax_backward(p, dp):
+    """dL/ds from p = softmax(s) and dp = dL/dp, row by row over the last axis.
+
+    The Jacobian of one row is dp_i/ds_j = p_i (delta_ij - p_j), so
+        ds_j = sum_i dp_i p_i (delta_ij - p_j) = p_j (dp_j - sum_i p_i dp_i).
+    """
+    # Softmax Jacobian: diag(p) - p p^T.  NOT p (1 - p) dp elementwise, which keeps only the
+    # diagonal and forgets that raising one logit lowers every other probability in the row.
+    return p * (dp - (p * dp).sum(-1, keepdims=True))
+
+
+class SelfAttention:
+    """Multi-head self-attention.  x (B, n, D) -> (B, n, D), heads of size d = D / heads.
+
+        Q = x Wq + bq,  K = x Wk + bk,  V = x Wv + bv            split into heads (B, h, n, d)
+        S = Q K^T / sqrt(d);  A = softmax(S) over keys             (B, h, n, n), rows sum to 1
+        Y = A V;  out = concat_h(Y) Wo + bo
+
+    1/sqrt(d) keeps the logits S O(1) when q, k have O(1) entries (q.k sums d products), so the
+    softmax does not start saturated.  self.attn holds A of the last forward, for plotting.
+    bk never gets a gradient: it adds q_i.bk to a whole row of S, and softmax ignores a constant
+    shift of its row.  It is kept so that Q, K, V have the same form.
+    Weights ~ N(0, 1/D) (variance-preserving for x with O(1) entries), biases 0.
+    """
+
+    NAMES = ("q", "k", "v", "o")
+
+    def __init__(self, dim, heads=1, seed=0, dtype=np.float64):
+        if dim % heads:
+            raise ValueError(f"dim {dim} is not divisible by heads {heads}")
+        rng = np.random.default_rng(seed)
+        self.dim, self.heads, self.d, self.dtype = dim, heads, dim // heads, np.dtype(dtype)
+        self.scale = 1.0 / math.sqrt(self.d)      # a Python float: keeps float32 arrays float32
+        self.params = {}
+        for c in self.NAMES:
+            w = rng.standard_normal((dim, dim)) / np.sqrt(dim)
+            self.params[f"W{c}"] = w.astype(self.dtype)
+        for c in self.NAMES:
+            self.params[f"b{c}"] = np.zeros(dim, self.dtype)
+
+    def _split(self, z, B, n):
+        """(B n, D) -> (B, h, n, d): head k owns columns k d .. (k+1) d of Q, K, V."""
+        return z.reshape(B, n, self.heads, self.d).transpose(0, 2, 1, 3)
+
+    def _merge(self, z):
+        """(B, h, n, d) -> (B n, D), the inverse of _split (concat_h)."""
+        B, h, n, d = z.shape
+        return z.transpose(0, 2, 1, 3).reshape(B * n, h * d)
+
+    def forward(self, x):
+        """x (B, n, D) -> (B, n, D).  Caches x, Q, K, V, A, Y; keeps A in self.attn."""
+        x = np.asarray(x, dtype=self.dtype)
+        B, n, D = x.shape
+        P = self.params
+        self.x2 = x.reshape(B * n, D)                 # 2-D: one BLAS call, not B small ones
+        self.Q, self.K, self.V = (self._split(self.x2 @ P[f"W{c}"] + P[f"b{c}"], B, n)
+                                  for c in "qkv")                              # (B, h, n, d)
+        S = (self.Q @ self.K.swapaxes(-1, -2)) * self.scale       # S = Q K^T / sqrt(d)
+        self.attn = softmax(S)                                    # A, softmax over keys j
+        self.Y = self._merge(self.attn @ self.V)                  # concat_h(A V)  (B n, D)
+        return (self.Y @ P["Wo"] + P["bo"]).reshape(B, n, D)
+
+    def backward(self, dout):
+        """dout (B, n, D) -> grads {Wq, Wk, Wv, Wo, bq, bk, bv, bo}; sets self.dx (B, n, D)."""
+        dout = np.asarray(dout, dtype=self.dtype)
+        B, n, D = dout.shape
+        P, A, grads = self.params, self.attn, {}
+        d2 = dout.reshape(B * n, D)
+        grads["Wo"], grads["bo"] = self.Y.T @ d2, d2.sum(0)       # out = Y Wo + bo
+        dY = self._split(d2 @ P["Wo"].T, B, n)                    # (B, h, n, d)
+        # Y = A V.  dA = dY V^T and dV = A^T dY: the transposes move the sum to the shared
+        # index (dA_ij = dy_i . v_j;  dv_j = sum_i A_ij dy_i, summed over the queries i).
+        dA = dY @ self.V.swapaxes(-1, -2)                         # (B, h, n, n)
+        dV = A.swapaxes(-1, -2) @ dY                              # (B, h, n, d)
+        dS = softmax_backward(A, dA)                              # full Jacobian, see above
+        # S = Q K^T / sqrt(d): the same 1/sqrt(d) of the forward scales dQ and dK.
+        dS = dS * self.scale
+        dQ = dS @ self.K                                          # dq_i = sum_j dS_ij k_j
+        dK = dS.swapaxes(-1, -2) @ self.Q                         # dk_j = sum_i dS_ij q_i
+        dx = np.zeros_like(self.x2)
+        for c, dz in zip("qkv", (dQ, dK, dV)):
+            dz = self._merge(dz)                                  # (B n, D)
+            grads[f"W{c}"], grads[f"b{c}"] = self.x2.T @ dz, dz.sum(0)
+            dx += dz @ P[f"W{c}"].T                               # x feeds Q, K and V
+        self.dx = dx.reshape(B, n, D)
+        return {k: grads[k] for k in self.params}
+
+
+class LayerNorm:
+    """Per token over the last axis:  y = (x - mu) / sqrt(var + eps) * gain + bias.
+
+    Backward, with xhat = (x - mu) rstd, rstd = 1/sqrt(var + eps) and g = dy * gain:
+        dx = rstd (g - mean(g) - xhat mean(g xhat))
+    the mean(g) term because mu depends on every x_j, the xhat term because var does.
+    """
+
+    def __init__(self, dim, eps=1e-5, dtype=np.float64):
+        self.eps, self.dtype = float(eps), np.dtype(dtype)
+        self.params = {"gain": np.ones(dim, self.dtype), "bias": np.zeros(dim, self.dtype)}
+
+    def forward(self, x):
+        """x (..., D) -> (..., D)."""
+        x = np.asarray(x, dtype=self.dtype)
+        xc = x - x.mean(-1, keepdims=True)
+        self.rstd = 1.0 / np.sqrt((xc * xc).mean(-1, keepdims=True) + self.eps)
+        self.xhat = xc * self.rstd
+        return self.xhat * self.params["gain"] + self.params["bias"]
+
+    def backward(self, dout):
+        """dout (..., D) -> grads {gain, bias}; sets self.dx (..., D)."""
+        dout = np.asarray(dout, dtype=self.dtype)
+        D = dout.shape[-1]
+        g = dout * self.params["gain"]
+        self.dx = self.rstd * (g - g.mean(-1, keepdims=True)
+                               - self.xhat * (g * self.xhat).mean(-1, keepdims=True))
+        return {"gain": (dout * self.xhat).reshape(-1, D).sum(0),
+                "bias": dout.reshape(-1, D).sum(0)}
+
+
+class AttentionNet:
+    """Transformer encoder over block tokens, with the interface of agent.SetNet.
+
+        x_i = phi(f_i)                 phi = MLP([F, H, H])   (tanh hidden, linear out)
+        for each layer l:
+            x = x + Attn_l(LN1_l(x))   multi-head self-attention, `heads` heads
+            x = x + FFN_l(LN2_l(x))    FFN = MLP([H, H, H])   (tanh hidden, linear out)
+        o_i = rho(LN_f(x_i))           rho = MLP([H, H, out]), last layer scaled by out_scale
+
+    Pre-LN (LN inside the residual branch, Xiong et al. 2020) rather than the post-LN of the
+    original transformer and of the authors' code: the residual stream x is an identity path
+    from every block's output to the embedding, so gradients reach the early layers unscaled
+    and training is stable at a fixed Adam learning rate without warm-up, which is how the
+    agent trains.  The stream itself is never normalised, hence LN_f before the head.
+    (The authors' encoder, policies/attention_discrete.py, is post-LN: x = LN(x + Attn(x)),
+    then x = LN(FFN(x)) with no residual around the FFN; their critic mean-pools the token
+    features before an MLP, where here, as with SetNet, per-token values are mean-pooled.)
+    tanh in the FFN (the authors use ReLU): it is agent.MLP, whose backward is already checked,
+    it is smooth, so finite-difference checks have no kinks to straddle, and LN in front keeps
+    its inputs O(1), away from saturation.
+
+    `params` holds the sub-modules' own arrays under prefixed keys ("embed.W0",
+    "block1.attn.Wq", "block0.ln2.gain", "ln_f.bias", "head.W1", ...), so an optimiser updating
+    them in place updates the network.  dtype=np.float32 keeps params, outputs and grads float32
+    (inputs are cast); initial values are the float64 ones rounded, for any dtype.
+    """
+
+    def __init__(self, n_features, hidden, out, seed=0, out_scale=1.0, heads=2, layers=2,
+                 mlp_backward=mlp_backward, dtype=np.float64):
+        self.dtype, self.layers = np.dtype(dtype), int(layers)
+        # Sub-module seeds [*seed, k(, k + 1)] with k >= 1: SeedSequence ignores trailing zeros
+        # ([s, 0] is the stream of s itself), so no appended index is 0.
+        s = [*np.atleast_1d(seed)]
+        mlp = lambda sizes, seed, out_scale=1.0: MLP(sizes, seed, out_scale, mlp_backward, dtype)
+        self.modules = {"embed": mlp([n_features, hidden, hidden], [*s, 1])}
+        for k in range(self.layers):
+            self.modules[f"block{k}.ln1"] = LayerNorm(hidden, dtype=self.dtype)
+            self.modules[f"block{k}.attn"] = SelfAttention(hidden, heads, [*s, 2, k + 1],
+                                                           self.dtype)
+            self.modules[f"block{k}.ln2"] = LayerNorm(hidden, dtype=self.dtype)
+            self.modules[f"block{k}.ffn"] = mlp([hidden] * 3, [*s, 3, k + 1])
+        self.modules["ln_f"] = LayerNorm(hidden, dtype=self.dtype)
+        self.modules["head"] = mlp([hidden, hidden, out], [*s, 4], out_scale)
+        self.params = {f"{name}.{k}": p for name, m in self.modules.items()
+                       for k, p in m.params.items()}
+
+    @property
+    def attn(self):
+        """Attention weights of the last forward, one (B, heads, n, n) array per layer."""
+        return [self.modules[f"block{k}.attn"].attn for k in range(self.layers)]
+
+    def _tokens(self, mlp, x):
+        """Apply an MLP (which takes (rows, in)) to every token of x (B, n, in)."""
+        B, n, _ = x.shape
+        return mlp.forward(x.reshape(B * n, -1)).reshape(B, n, -1)
+
+    def _tokens_backward(self, mlp, dout):
+        """Backward of _tokens -> (grads, dL/dx (B, n, in))."""
+        B, n, _ = dout.shape
+        grads = mlp.backward(dout.reshape(B * n, -1))
+        return grads, mlp.dx.reshape(B, n, -1)
+
+    def forward(self, f):
+        """f (B, n, F) -> o (B, n, out)."""
+        m = self.modules
+        x = self._tokens(m["embed"], np.asarray(f, dtype=self.dtype))
+        for k in range(self.layers):
+            b = f"block{k}."
+            x = x + m[b + "attn"].forward(m[b + "ln1"].forward(x))
+            x = x + self._tokens(m[b + "ffn"], m[b + "ln2"].forward(x))
+        return self._tokens(m["head"], m["ln_f"].forward(x))
+
+    def backward(self, dout):
+        """dout (B, n, out) -> grads {"embed.W0": ..., "head.b1": ...}; sets self.dx (B, n, F)."""
+        m, grads = self.modules, {}
+        grads["head"], dz = self._tokens_backward(m["head"], np.asarray(dout, dtype=self.dtype))
+        grads["ln_f"] = m["ln_f"].backward(dz)
+        dx = m["ln_f"].dx
+        for k in reversed(range(self.layers)):
+            b = f"block{k}."
+            # x_out = x + branch(x): the identity passes dx through, the branch adds its own.
+            grads[b + "ffn"], dh = self._tokens_backward(m[b + "ffn"], dx)
+            grads[b + "ln2"] = m[b + "ln2"].backward(dh)
+            dx = dx + m[b + "ln2"].dx
+            grads[b + "attn"] = m[b + "attn"].backward(dx)
+            grads[b + "ln1"] = m[b + "ln1"].backward(m[b + "attn"].dx)
+            dx = dx + m[b + "ln1"].dx
+        grads["embed"], self.dx = self._tokens_backward(m["embed"], dx)
+        return {f"{name}.{k}": grads[name][k] for name in m for k in m[name].params}
+
+
 # ---- The factorised action distribution (sec 3):  pi(b, x, y) = pi(b) pi(x | b) pi(y | b) ----
 
 def log_softmax(z):
@@ -389,8 +614,12 @@ def gae(rewards, values, terminated, truncated, next_values, gamma, lam):
 
 # ---- The agent ---------------------------------------------------------------------------
 
+NETWORKS = {"setnet": SetNet, "attention": AttentionNet}
+
+
 class Agent:
-    """Policy pi(b, x, y | s, g) and value V(s, g), two SetNets with separate Adam states.
+    """Policy pi(b, x, y | s, g) and value V(s, g): two networks (SetNets, or AttentionNets with
+    network="attention") with separate Adam states.
 
     mlp_backward(params, hs, dout) -> (grads, dx) is the backward pass of every MLP in them, and
     action_dist the class of the policy's distribution (default ActionDist): the library's, or a
@@ -398,17 +627,20 @@ class Agent:
     """
 
     def __init__(self, n_blocks=6, n_x=37, n_y=None, hidden=128, seed=0, mlp_backward=mlp_backward,
-                 dtype="float64", action_dist=None):
+                 dtype="float64", action_dist=None, network="setnet"):
         self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
         self.n_y = self.n_blocks if n_y is None else int(n_y)
         self.dtype, self.action_dist = np.dtype(dtype), action_dist or ActionDist
         if self.dtype not in (np.float32, np.float64):
             raise ValueError(f"dtype {dtype!r}: the networks compute in float32 or float64")
+        if network not in NETWORKS:
+            raise ValueError(f"network {network!r}: one of {sorted(NETWORKS)}")
+        self.network, Net = network, NETWORKS[network]
         F = featurize(np.zeros((1, self.n_blocks, 6)), self.n_y).shape[-1]
-        self.actor = SetNet(F, hidden, 1 + self.n_x + self.n_y, seed=[seed, 0], out_scale=0.01,
-                            mlp_backward=mlp_backward, dtype=self.dtype)
-        self.critic = SetNet(F, hidden, 1, seed=[seed, 1], mlp_backward=mlp_backward,
-                             dtype=self.dtype)
+        self.actor = Net(F, hidden, 1 + self.n_x + self.n_y, seed=[seed, 0], out_scale=0.01,
+                         mlp_backward=mlp_backward, dtype=self.dtype)
+        self.critic = Net(F, hidden, 1, seed=[seed, 1], mlp_backward=mlp_backward,
+                          dtype=self.dtype)
         self.actor_opt, self.critic_opt = Adam(self.actor.params), Adam(self.critic.params)
         self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
 
@@ -578,7 +810,7 @@ class Agent:
     def save(self, path, extra=None):
         """Write the parameters plus a header and any `extra` arrays as a plain .npz (save_npz).
         The header is what load needs to rebuild the agent: "format_version", "sizes" (n_blocks,
-        n_x, n_y, hidden), "dtype" (the networks' float32 or float64) and "geometry", the
+        n_x, n_y, hidden), "dtype" (float32 or float64), "network" and "geometry", the
         world's env2d.GEOMETRY that the features assume."""
         save_npz(path, {**self.header(), **self.state_dict(), **(extra or {})})
 
@@ -586,6 +818,7 @@ class Agent:
         return {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
                 "sizes": np.array([self.n_blocks, self.n_x, self.n_y, self.hidden], dtype=np.int64),
                 "dtype": np.array(self.dtype.name),
+                "network": np.array(self.network),
                 "geometry": np.array(list(GEOMETRY.values()), dtype=np.float64)}
 
     @classmethod
@@ -615,7 +848,10 @@ class Agent:
         dtype = str(data.get("dtype", ""))
         if dtype not in ("float32", "float64"):
             raise ValueError(f"{path}: dtype {dtype!r}, expected float32 or float64")
-        agent = cls(n_blocks, n_x, n_y, hidden, dtype=dtype)
+        network = str(data.get("network", ""))
+        if network not in NETWORKS:
+            raise ValueError(f"{path}: network {network!r}, expected one of {sorted(NETWORKS)}")
+        agent = cls(n_blocks, n_x, n_y, hidden, dtype=dtype, network=network)
         params, extra = agent.state_dict(), set(extra)
         missing = extra - set(data)
         if missing:

@@ -22,6 +22,9 @@ class Config:
     """action budget of the verification run from s_T (sec 4.2) and of the stretch tasks"""
     hidden: int = 128
     """width of the actor's and the critic's per-block networks"""
+    network: str = "setnet"
+    """sec 3: setnet (a deep set with hand-computed relations) | attention (self-attention over
+    block tokens, as in the paper; not yet the default: it must first learn as well)"""
     dtype: str = "float32"
     """the networks' arithmetic, float32 | float64: float32 is twice as fast and learns the same
     (the finite-difference tests use float64)"""

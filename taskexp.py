@@ -454,7 +454,7 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
     rng = np.random.default_rng(cfg.seed) if rng is None else rng
     if agent is None:
         agent = Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, seed=cfg.seed,
-                      mlp_backward=pieces.mlp_backward, dtype=cfg.dtype)
+                      mlp_backward=pieces.mlp_backward, dtype=cfg.dtype, network=cfg.network)
     run = run or RunState(results=dict(config=asdict(cfg), rounds=[], wallclock={}))
     with physics_pool(workers, cfg.n_blocks) as pool:
         envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool)
