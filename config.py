@@ -34,8 +34,9 @@ class Config:
     base_demos: int = 20000
     """sec 4.1: single-block demonstrations for behaviour cloning"""
     warmup: int = 8
-    """sec 4.1: up to this many random moves before a demo, so that demos see stacks of every
-    height; the paper starts from scattered scenes (warmup = 0)"""
+    """sec 4.1: a scene takes warmup + 1 random moves, each a demo if usable, so demos come after
+    0..warmup earlier moves and see stacks of every height; the paper's demos come from
+    scattered scenes (warmup = 0)"""
     max_stay: int = 2
     """sec 4.1: up to this many "stay where you are" goals for other blocks in a base task"""
     bc_epochs: int = 8
