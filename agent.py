@@ -327,10 +327,9 @@ class SelfAttention:
 
     def backward(self, dout):
         """dout (B, n, D) -> grads {Wq, Wk, Wv, Wo, bq, bk, bv, bo}; sets self.dx (B, n, D)."""
-        dout = np.asarray(dout, dtype=self.dtype)
-        B, n, D = dout.shape
+        B, n, D = np.shape(dout)
         P, A, grads = self.params, self.attn, {}
-        d2 = dout.reshape(B * n, D)
+        d2 = np.asarray(dout, dtype=self.dtype).reshape(B * n, D)
         grads["Wo"], grads["bo"] = self.Y.T @ d2, d2.sum(0)       # out = Y Wo + bo
         dY = self._split(d2 @ P["Wo"].T, B, n)                    # (B, h, n, d)
         # Y = A V.  dA = dY V^T and dV = A^T dY: the transposes move the sum to the shared

@@ -1,7 +1,7 @@
 """exercises -- the problem set of taskexp: a check per exercise, the notebook loader, the student
 kit and the CLI.
 
-Seven exercises (notebooks/exercises/exN_*.ipynb), each a function the student writes; the
+Eight exercises (notebooks/exercises/exN_*.ipynb), each a function the student writes; the
 reference solution is the library's own code, wrapped in the student's signature (REFERENCE):
 
   ex1  mlp_backward(params, hs, dout) -> (grads, dx)          agent.mlp_backward
@@ -16,6 +16,7 @@ reference solution is the library's own code, wrapped in the student's signature
   ex6  select_goal(agent, s0, sT, candidates) -> index        taskexp.select_goal (eq. 1)
        relabel(traj, env) -> Trajectory or None                taskexp.relabel
   ex7  behavioural: the student's ex1-ex4 train the base policy (sec 4.1)
+  ex8  attention_backward(params, cache, dout) -> (grads, dx)  agent.SelfAttention.backward
 
 check_exN(...) prints PASS, or raises AssertionError with the failing case, expected vs got and a
 hint; it writes nothing to stderr (nbgrader would give a graded cell 0 points). Deterministic.
@@ -27,9 +28,11 @@ recorded cases (vectors.py); exercise 4 and 7 use the student's exercise 2 (acti
     python -m exercises release OUT        # the student kit
     python -m exercises course DIR         # an nbgrader course that makes the same kit
 
-checks.py (ex1-ex6), behaviour.py (ex7), dist.py (ActionDist from ex2), notebooks.py (loader,
-CLI), kit.py (kit, course), vectors.py (recorded cases), problems.py (notebooks, points).
+checks.py (ex1-ex6), behaviour.py (ex7), attention.py (ex8), dist.py (ActionDist from ex2),
+notebooks.py (loader, CLI), kit.py (kit, course), vectors.py (recorded cases), problems.py
+(notebooks, points).
 """
+from .attention import check_ex8
 from .behaviour import EX7, base_policy_success, check_ex7, student_pieces, unfinished
 from .checks import (
                      REFERENCE,

@@ -1,4 +1,4 @@
-"""exercises/checks.py -- the checks of exercises 1-6, and the reporting they share.  ~500 lines.
+"""exercises/checks.py -- the checks of exercises 1-6, and the reporting they share.  ~610 lines.
 
 Each check_exN(student functions) runs them on fixed inputs of varied shapes plus edge cases and
 compares them with the reference solution. It prints one PASS line and returns None, or raises an
@@ -42,6 +42,17 @@ def _ref_logp_entropy(out, actions, n_x):
     return d.log_prob(actions), d.entropy()
 
 
+def _ref_attention_backward(params, cache, dout):
+    """agent.SelfAttention.backward on a forward's cache (as check_ex8 hands it to students)."""
+    B, n, D = cache["x"].shape
+    att = agent.SelfAttention(D, cache["heads"])
+    att.params = {k: np.array(v, dtype=np.float64) for k, v in params.items()}
+    att.x2, att.Y = cache["x"].reshape(B * n, D), cache["Y"].reshape(B * n, D)
+    att.Q, att.K, att.V, att.attn = cache["Q"], cache["K"], cache["V"], cache["attn"]
+    grads = att.backward(dout)
+    return grads, att.dx
+
+
 REFERENCE = dict(
     mlp_backward=agent.mlp_backward, logp_entropy=_ref_logp_entropy,
     logp_entropy_backward=lambda out, actions, n_x, a, c:
@@ -50,7 +61,8 @@ REFERENCE = dict(
     gae=agent.gae, ppo_loss=lambda *args, **kw: agent.ppo_loss(*args, **kw)[:2],
     alter=lambda goals, env, rng: taskexp.alter(goals, env, rng),
     select_goal=lambda ag, s0, sT, cands: taskexp.select_goal(ag, s0, sT, cands)[0],
-    relabel=lambda traj, env: taskexp.relabel(traj, env))
+    relabel=lambda traj, env: taskexp.relabel(traj, env),
+    attention_backward=_ref_attention_backward)
 
 
 # ---- Reporting ---------------------------------------------------------------------------------

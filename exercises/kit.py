@@ -22,6 +22,7 @@ import shutil
 import numpy as np
 
 from . import vectors
+from .attention import check_ex8
 from .checks import check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6
 from .notebooks import NOTEBOOK_DIR, write_notebooks
 from .problems import FUNCTIONS, NOTEBOOKS, POINTS
@@ -43,6 +44,7 @@ EXERCISED = {
     "ex4": [("agent", "ppo_loss")],
     "ex5": [("taskexp", "alter"), ("taskexp", "random_position")],
     "ex6": [("taskexp", "select_goal"), ("taskexp", "relabel")],
+    "ex8": [("agent", "softmax_backward"), ("agent", "SelfAttention.backward")],
 }
 
 def find_function(tree, qualname):
@@ -136,16 +138,18 @@ def answers_in(folder):
 
 
 def record_vectors():
-    """Every case of the checks of ex1-ex6, made on the full library -> {key: encoded case}."""
+    """Every case of the checks of ex1-ex6 and ex8, made on the full library -> {key: encoded
+    case}."""
     if vectors.in_kit():
         raise ValueError("this is a student kit, which has no reference solutions: "
                          "make kits from the repository")
 
     def not_mine(*args, **kwargs):
         raise NotImplementedError()
-    checks = [check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6]
+    checks = dict(ex1=check_ex1, ex2=check_ex2, ex3=check_ex3, ex4=check_ex4, ex5=check_ex5,
+                  ex6=check_ex6, ex8=check_ex8)
     with vectors.recording() as cases, contextlib.redirect_stdout(io.StringIO()):
-        for ex, check in zip(["ex1", "ex2", "ex3", "ex4", "ex5", "ex6"], checks):
+        for ex, check in checks.items():
             with contextlib.suppress(AssertionError):     # each case is made before it is run
                 check(*[not_mine] * len(FUNCTIONS[ex]))
     return cases
@@ -231,11 +235,12 @@ WHAT = {"ex1": "the MLP backward pass", "ex2": "log-probability and entropy of t
         "and their gradients", "ex3": "generalised advantage estimation (GAE)",
         "ex4": "PPO's clipped loss and its gradient", "ex5": "one-alteration task sampling "
         "(sec 4.2)", "ex6": "goal selection by equation (1), hindsight relabelling",
-        "ex7": "nothing new: your ex1-ex4 train the base policy (15 s to a minute)"}
+        "ex7": "nothing new: your ex1-ex4 train the base policy (15 s to a minute)",
+        "ex8": "the backward pass of a self-attention layer (the paper's network, sec 3)"}
 
 README = """# Task expansion from the inside: the student kit
 
-Seven exercises on the method of "Self-Generating Data for Goal-Conditioned Compositional
+Eight exercises on the method of "Self-Generating Data for Goal-Conditioned Compositional
 Problems" (Yuan, Li, Wu), in numpy. In each notebook you write one piece of the method; its check
 says PASS, or which case fails, what it expected, what you returned, and a hint.
 
@@ -262,11 +267,11 @@ failed. Or, in a terminal in this folder:
 
     python -m exercises ex3 ex3_gae.ipynb     # one exercise
     python -m exercises ex7 .                 # exercise 7: trains with your ex1-ex4
-    python -m exercises all .                 # all seven, then your total
+    python -m exercises all .                 # all eight, then your total
 
 ## What is in this folder
 
-- `ex1_mlp_backward.ipynb` ... `ex7_base_policy.ipynb`: the exercises; hand these in.
+- `ex1_mlp_backward.ipynb` ... `ex8_attention_backward.ipynb`: the exercises; hand these in.
 - `agent.py`, `taskexp.py`, `env2d.py`, `config.py`, `rollout.py`, `report.py`, `cli.py`: the
   taskexp library that the notebooks import. The functions you write are stubs here (they raise
   NotImplementedError); where the library needs them, exercise 7 runs it on yours.

@@ -8,6 +8,7 @@ import os
 import re
 import sys
 
+from .attention import check_ex8
 from .behaviour import check_ex7
 from .checks import check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6, passes
 from .dist import student_action_dist
@@ -16,7 +17,7 @@ from .problems import FUNCTIONS, NOTEBOOKS, POINTS
 NOTEBOOK_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                             "notebooks", "exercises")       # the instructor notebooks
 CHECKS = dict(ex1=check_ex1, ex2=check_ex2, ex3=check_ex3, ex4=check_ex4, ex5=check_ex5,
-              ex6=check_ex6, ex7=check_ex7)
+              ex6=check_ex6, ex7=check_ex7, ex8=check_ex8)
 
 _loading = []         # the folders of the notebooks being loaded: action_dist() looks there
 
@@ -107,9 +108,9 @@ def write_notebooks(out_dir, student=True, src_dir=NOTEBOOK_DIR):
 
 
 USAGE = """usage: python -m exercises COMMAND
-  ex1 .. ex6 NOTEBOOK   check one exercise in your notebook, e.g. ex3 ex3_gae.ipynb
+  ex1 .. ex6, ex8 NOTEBOOK   check one exercise in your notebook, e.g. ex3 ex3_gae.ipynb
   ex7 FOLDER            exercise 7: trains with the ex1-ex4 notebooks in FOLDER (e.g. .)
-  all FOLDER            check all seven notebooks in FOLDER, then the total
+  all FOLDER            check all eight notebooks in FOLDER, then the total
   release OUT           (instructors) write the student kit into OUT
   course DIR            (instructors) write an nbgrader course into DIR"""
 

@@ -28,7 +28,7 @@ from env2d import is_success
 
 R = exercises.REFERENCE
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(exercises.__file__)))   # the repository
-SIMPLE = ["ex1", "ex2", "ex3", "ex4", "ex5", "ex6"]          # all but the behavioural ex7
+SIMPLE = ["ex1", "ex2", "ex3", "ex4", "ex5", "ex6", "ex8"]   # all but the behavioural ex7
 
 
 def instructor(ex):
@@ -199,6 +199,39 @@ def relabel_variant(blocks="goal", check_table=True):
     return relabel
 
 
+def attention_variant(jacobian="full", scale=True, dq="dS K", dk="dS^T Q", dx_from="qkv",
+                      dv="A^T dY"):
+    """The backward of check_ex8 with one classic mistake (the defaults are right)."""
+    def attention_backward(params, cache, dout):
+        x, h = cache["x"], cache["heads"]
+        B, n, D = x.shape
+        A, Q, K, V = cache["attn"], cache["Q"], cache["K"], cache["V"]
+        split = lambda z: z.reshape(B, n, h, D // h).transpose(0, 2, 1, 3)
+        merge = lambda z: z.transpose(0, 2, 1, 3).reshape(B * n, D)
+        g, x2 = dout.reshape(B * n, D), x.reshape(B * n, D)
+        grads = {"Wo": cache["Y"].reshape(B * n, D).T @ g, "bo": g.sum(0)}
+        dY = split(g @ params["Wo"].T)
+        dA = dY @ V.swapaxes(-1, -2)
+        dV = A.swapaxes(-1, -2) @ dY if dv == "A^T dY" else A @ dY
+        if jacobian == "full":
+            dS = A * (dA - (A * dA).sum(-1, keepdims=True))
+        elif jacobian == "elementwise":
+            dS = A * (1 - A) * dA                        # the diagonal of the Jacobian only
+        else:
+            dS = dA                                      # no softmax at all
+        dS = dS * {True: cache["scale"], False: 1.0, "D": 1 / np.sqrt(D)}[scale]
+        dQ = dS @ K if dq == "dS K" else dS.swapaxes(-1, -2) @ K
+        dK = dS.swapaxes(-1, -2) @ Q if dk == "dS^T Q" else dS @ Q
+        dx = np.zeros((B * n, D))
+        for c, dz in zip("qkv", (dQ, dK, dV)):
+            dz = merge(dz)
+            grads["W" + c], grads["b" + c] = x2.T @ dz, dz.sum(0)
+            if c in dx_from:
+                dx += dz @ params["W" + c].T
+        return grads, dx.reshape(B, n, D)
+    return attention_backward
+
+
 WRONG = {   # (exercise, the student's functions with one mistake, a phrase the check must print)
     "ex1 1 - h instead of 1 - h^2":
         ("ex1", [mlp_backward_variant(tanh_grad=lambda h: 1 - h)], "1 - h^2"),
@@ -231,6 +264,17 @@ WRONG = {   # (exercise, the student's functions with one mistake, a phrase the 
         ("ex6", [R["select_goal"], relabel_variant(blocks="all")], "only those blocks"),
     "ex6 relabel ignores falls":
         ("ex6", [R["select_goal"], relabel_variant(check_table=False)], "fell off"),
+    "ex8 softmax derivative p (1 - p)":
+        ("ex8", [attention_variant(jacobian="elementwise")], "softmax Jacobian"),
+    "ex8 no softmax derivative": ("ex8", [attention_variant(jacobian="none")], "softmax Jacobian"),
+    "ex8 no 1/sqrt(d) in the backward": ("ex8", [attention_variant(scale=False)], "1/sqrt(d)"),
+    "ex8 1/sqrt(D) instead of 1/sqrt(d)": ("ex8", [attention_variant(scale="D")], "d = D / heads"),
+    "ex8 transposed keys": ("ex8", [attention_variant(dq="dS^T K", dk="dS Q")], "transposed keys"),
+    "ex8 dQ with dS^T": ("ex8", [attention_variant(dq="dS^T K")], "dQ = dS K"),
+    "ex8 dK with dS": ("ex8", [attention_variant(dk="dS Q")], "dK = dS^T Q"),
+    "ex8 dx through V only": ("ex8", [attention_variant(dx_from="v")], "x feeds Q, K and V"),
+    "ex8 dx through Q only": ("ex8", [attention_variant(dx_from="q")], "x feeds Q, K and V"),
+    "ex8 dV = A dY": ("ex8", [attention_variant(dv="A dY")], "dV = A^T dY"),
 }
 
 
@@ -413,7 +457,7 @@ def test_cli_all_ends_with_the_total_and_ex7_names_what_is_missing(released, tmp
     res = cli("all", str(mixed_folder(tmp_path, ["ex4"], released)))
     lines = res.stdout.strip().splitlines()
     assert res.returncode == 1
-    assert lines[-1] == "total: 11/16 points; 5 of 7 exercises pass (fail: ex4, ex7)", lines[-1]
+    assert lines[-1] == "total: 14/19 points; 6 of 8 exercises pass (fail: ex4, ex7)", lines[-1]
     ex7 = res.stdout[res.stdout.index("ex7 FAIL"):]
     assert "not done yet" in ex7 and "ex4 (ppo_loss in ex4_ppo_loss.ipynb)" in ex7, ex7
     assert not any(f"{ex} (" in ex7 for ex in ["ex1", "ex2", "ex3"]), ex7

@@ -3,14 +3,14 @@ skip), run as an instructor would, on the course that `python -m exercises cours
 
     nbgrader generate_assignment taskexp     on the instructor notebooks (source/taskexp/)
     nbgrader autograde taskexp               on three submissions, copies of release/taskexp/:
-        reference   every solution cell pasted from the instructor notebooks: 16/16, ex7 included
-        blank       the release as it is: 0/16
+        reference   every solution cell pasted from the instructor notebooks: 19/19, ex7 included
+        blank       the release as it is: 0/19
         wrong       the reference with select_goal = argmax V(s_T, g) (end2new, equation 1 without
                     its first term): loses ex6's 2 points and nothing else
 
 nbclient, which tests/test_exercises.py uses, executes notebooks but does not grade: nbgrader
 gives 0 points to a graded cell that writes to stderr, stops a cell after its timeout, and grades
-in the student's folder. About a minute and a half on two cores: 21 kernels, ex7 trains twice.
+in the student's folder. About a minute and a half on two cores: 24 kernels, ex7 trains twice.
 """
 import json
 import os
@@ -57,7 +57,7 @@ def course(tmp_path_factory):
     with Gradebook(f"sqlite:///{root / 'gradebook.db'}") as gb:
         for student in ("reference", "blank", "wrong"):
             sub = gb.find_submission("taskexp", student)
-            assert sub.max_score == sum(POINTS.values()) == 16
+            assert sub.max_score == sum(POINTS.values()) == 19
             scores[student] = {nb.name[:3]: nb.score for nb in sub.notebooks}
     return root, scores
 

@@ -122,7 +122,7 @@ def test_recorded_cases_are_the_live_ones(kit_dir):
     with open(os.path.join(kit_dir, "exercises", "vectors.json")) as f:
         recorded = json.load(f)["cases"]
     live = json.loads(json.dumps(kit.record_vectors()))
-    assert recorded == live and len(live) == 5 + 6 + 12 + 6 + 7 + 13
+    assert recorded == live and len(live) == 5 + 6 + 12 + 6 + 7 + 13 + 5
 
 
 def test_vectors_read_back_what_was_written():
@@ -169,11 +169,11 @@ def test_kit_runs_from_a_folder_outside_the_checkout(kit_dir, bare_python, tmp_p
     blank = cli("all", ".", cwd=kit_copy, python=bare_python)
     assert blank.returncode == 1 and blank.stderr == "", blank.stderr
     assert blank.stdout.strip().splitlines()[-1].startswith(
-        "total: 0/16 points; 0 of 7 exercises pass"), blank.stdout
+        "total: 0/19 points; 0 of 8 exercises pass"), blank.stdout
 
     kit.paste_solutions(kit_copy)
     full = cli("all", ".", cwd=kit_copy, python=bare_python)
     assert full.returncode == 0, full.stdout + full.stderr
-    assert full.stdout.strip().splitlines()[-1] == "total: 16/16 points; 7 of 7 exercises pass"
+    assert full.stdout.strip().splitlines()[-1] == "total: 19/19 points; 8 of 8 exercises pass"
     assert [line.split()[:2] for line in full.stdout.splitlines() if "PASS" in line] == [
         [ex, "PASS:"] for ex in exercises.NOTEBOOKS]

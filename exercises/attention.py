@@ -1,0 +1,146 @@
+"""exercises/attention.py -- the check of exercise 8: the backward pass of one self-attention layer
+(agent.SelfAttention) over block tokens.  ~150 lines.
+
+The student writes attention_backward(params, cache, dout) -> (grads, dx), where cache is what
+SelfAttention.forward keeps. The check compares it with the reference (agent.SelfAttention.backward,
+through checks.REFERENCE) on one and two heads, one token, one sequence and saturated attention, and
+with central finite differences through agent.SelfAttention.forward. Its hint is chosen by which
+gradients are wrong and how: a constant factor (1/sqrt(d)), dS rows that do not sum to zero (the
+softmax Jacobian: grads["bk"] must be 0), transposed keys (grads["bq"] = 0), dx alone (x feeds Q,
+K and V).
+"""
+import copy
+
+import numpy as np
+
+import agent
+
+from .checks import REFERENCE, Report, call, diff, first, graded, numerical_grad
+from .vectors import case
+
+NAMES = ("Wq", "Wk", "Wv", "Wo", "bq", "bk", "bv", "bo")
+
+HINTS = dict(
+    out="out = Y Wo + bo over all B n tokens: dWo = Y^T dout and dbo = dout summed over B and n "
+        "(reshape to (B n, D)); then dY = dout Wo^T, split into heads (B, h, n, d)",
+    values="Y = A V per head: dV = A^T dY (dv_j = sum_i A_ij dy_i, summed over the queries i), "
+           "dA = dY V^T; dWv = x^T dV and dbv = dV summed, with dV merged back to (B n, D)",
+    scale="S = Q K^T / sqrt(d), with d = D / heads the size of a head (cache['scale']): the "
+          "backward needs the same 1/sqrt(d), once, in dS before dQ and dK",
+    softmax="softmax Jacobian: dS_ij = A_ij (dA_ij - sum_k A_ik dA_ik), row by row, not the "
+            "elementwise A (1 - A) dA: raising one score lowers every other probability of its "
+            "row. Check: each row of dS sums to 0, so grads['bk'] is 0",
+    keys_q="transposed keys: S_ij = q_i . k_j / sqrt(d), so dQ = dS K (dq_i = sum_j dS_ij k_j), "
+           "not dS^T K",
+    keys_k="transposed keys: S_ij = q_i . k_j / sqrt(d), so dK = dS^T Q (dk_j = sum_i dS_ij q_i, "
+           "summed over the queries i), not dS Q",
+    scores="the scores: dA = dY V^T; dS = softmax Jacobian applied to dA (not A (1 - A) dA); "
+           "times 1/sqrt(d); dQ = dS K and dK = dS^T Q (keys not transposed)",
+    dx="x feeds Q, K and V: dx = dQ Wq^T + dK Wk^T + dV Wv^T (each merged back to (B n, D)), "
+       "the sum of all three",
+    one_token="with one token A = [[1]]: the scores get no gradient (dQ = dK = 0) and "
+              "out = (x Wv + bv) Wo + bo",
+    large="large logits saturate the softmax (rows of A near one-hot): use the cached attn, "
+          "do not recompute exp of the scores")
+
+
+def _tiny(a, ref):
+    return float(np.max(np.abs(a), initial=0.0)) <= 1e-6 * float(np.max(np.abs(ref),
+                                                                          initial=0.0)) + 1e-12
+
+
+def _factor(got, want):
+    """c != 1 if got = c want (a gradient off by a constant factor), else None."""
+    got, want = np.asarray(got, dtype=np.float64), np.asarray(want, dtype=np.float64)
+    if got.shape != want.shape or not want.any():
+        return None
+    c = float((got * want).sum() / (want * want).sum())
+    return c if np.allclose(got, c * want, rtol=1e-5, atol=1e-9) and abs(c - 1) > 1e-4 else None
+
+
+def diagnose(grads, want, bad, default):
+    """The hint for the gradients in `bad` (the names that differ from `want`), from how they
+    differ."""
+    if bad == {"dx"}:
+        return HINTS["dx"]
+    if bad & {"Wo", "bo"}:
+        return HINTS["out"]
+    if bad & {"Wv", "bv"}:
+        return HINTS["values"]
+    if not bad & {"Wq", "Wk", "bq", "bk"}:
+        return default
+    if "Wk" not in bad:
+        return HINTS["keys_q"]
+    if "Wq" not in bad:
+        return HINTS["keys_k"]
+    c = _factor(grads["Wq"], want["Wq"])
+    if c is not None and _factor(grads["Wk"], want["Wk"]) is not None:
+        return f"your dWq is {c:.4g} times the expected: {HINTS['scale']}"
+    if _tiny(grads["bq"], want["bq"]) and not _tiny(want["bq"], want["Wq"]):
+        return HINTS["keys_q"] + "; and dK = dS^T Q. (Your grads['bq'] is 0: dS^T has rows " \
+            "that sum to 0)"
+    if not _tiny(grads["bk"], want["bq"]):
+        return HINTS["softmax"]
+    return HINTS["scores"]
+
+
+def _make_ex8(B, n, D, heads, scale, seed):
+    att = agent.SelfAttention(D, heads, seed=seed)
+    rng = np.random.default_rng(seed)
+    for c in "qk":
+        att.params[f"W{c}"] *= scale
+    for c in "qkvo":
+        att.params[f"b{c}"] += 0.3 * rng.standard_normal(D)
+    x, dout = rng.standard_normal((B, n, D)), rng.standard_normal((B, n, D))
+    att.forward(x)
+    cache = dict(x=x, Q=att.Q, K=att.K, V=att.V, attn=att.attn, Y=att.Y.reshape(B, n, D),
+                 heads=heads, scale=att.scale)
+    grads, dx = REFERENCE["attention_backward"](att.params, cache, dout)
+    return dict(params=att.params, cache=cache, dout=dout, grads=grads, dx=dx)
+
+
+@graded
+def check_ex8(attention_backward):
+    """attention_backward(params, cache, dout) -> (grads, dx), against agent.SelfAttention.backward
+    and central finite differences."""
+    rep = Report("ex8")
+    cases = [("one head", 3, 4, 4, 1, 1.0, HINTS["scores"]),
+             ("two heads", 2, 5, 6, 2, 1.0, HINTS["scores"]),
+             ("one token (n = 1)", 3, 1, 4, 2, 1.0, HINTS["one_token"]),
+             ("one sequence (B = 1), three heads", 1, 6, 6, 3, 1.0, HINTS["scores"]),
+             ("large logits (saturated attention)", 2, 4, 4, 1, 6.0, HINTS["large"])]
+    for seed, (name, B, n, D, heads, scale, hint) in enumerate(cases):
+        c = case(f"ex8/{seed}", lambda: _make_ex8(B, n, D, heads, scale, 800 + seed))
+        want, want_dx = c["grads"], c["dx"]
+        detail = f"B={B}, n={n}, D={D}, heads={heads}, seed {800 + seed}"
+        res, err = call(attention_backward, c["params"], c["cache"], c["dout"])
+        if err is None and not (isinstance(res, tuple) and len(res) == 2
+                                and isinstance(res[0], dict)):
+            err = f"returned {type(res).__name__}, expected a tuple (grads dict, dx)"
+        if err:
+            rep.case(name, detail, err, hint)
+            continue
+        grads, dx = res
+        missing = [k for k in NAMES if k not in grads]
+        if missing:
+            rep.case(name, detail, f"grads has no key {missing[0]!r}", hint)
+            continue
+        problems = {k: diff(f"grads[{k!r}]", grads[k], want[k]) for k in NAMES}
+        problems["dx"] = diff("dx", dx, want_dx)
+        bad = {k for k, p in problems.items() if p}
+        shapes_ok = all(np.shape(grads[k]) == np.shape(want[k]) for k in NAMES) and \
+            np.shape(dx) == np.shape(want_dx)
+        rep.case(name, detail, first(*problems.values()),
+                 diagnose(grads, want, bad, hint) if shapes_ok else hint)
+        if name == "two heads" and not rep.failures:    # and against the definition of a gradient
+            att = agent.SelfAttention(D, heads)
+            att.params = copy.deepcopy(c["params"])
+            x = c["cache"]["x"].copy()
+            f = lambda: np.sum(att.forward(x) * c["dout"])       # dL/dout = dout
+            rep.case("finite differences", detail,
+                     first(*(diff(f"grads[{k!r}] vs finite differences", grads[k],
+                                  numerical_grad(f, att.params[k]), 1e-5, 1e-6) for k in NAMES),
+                           diff("dx vs finite differences", dx, numerical_grad(f, x), 1e-5,
+                                1e-6)), hint)
+    rep.done(" (agrees with the reference, agent.SelfAttention.backward, and central finite "
+             "differences)")
