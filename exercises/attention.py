@@ -15,7 +15,7 @@ import numpy as np
 
 import agent
 
-from .checks import REFERENCE, Report, call, diff, first, graded, numerical_grad
+from .checks import REFERENCE, Report, call_backward, diff, first, graded, numerical_grad
 from .vectors import case
 
 NAMES = ("Wq", "Wk", "Wv", "Wo", "bq", "bk", "bv", "bo")
@@ -113,10 +113,7 @@ def check_ex8(attention_backward):
         c = case(f"ex8/{seed}", lambda: _make_ex8(B, n, D, heads, scale, 800 + seed))
         want, want_dx = c["grads"], c["dx"]
         detail = f"B={B}, n={n}, D={D}, heads={heads}, seed {800 + seed}"
-        res, err = call(attention_backward, c["params"], c["cache"], c["dout"])
-        if err is None and not (isinstance(res, tuple) and len(res) == 2
-                                and isinstance(res[0], dict)):
-            err = f"returned {type(res).__name__}, expected a tuple (grads dict, dx)"
+        res, err = call_backward(attention_backward, c["params"], c["cache"], c["dout"])
         if err:
             rep.case(name, detail, err, hint)
             continue

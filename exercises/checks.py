@@ -164,6 +164,15 @@ def diff(name, got, want, rtol=1e-6, atol=1e-8):
             f"got {got[i]:.6g}, expected {want[i]:.6g}{sign}")
 
 
+def call_backward(fn, *args):
+    """Call a student's backward pass -> (result, None), or (result, what is wrong): it raised,
+    or it did not return a tuple (grads dict, dx)."""
+    res, err = call(fn, *args)
+    if err is None and not (isinstance(res, tuple) and len(res) == 2 and isinstance(res[0], dict)):
+        err = f"returned {type(res).__name__}, expected a tuple (grads dict, dx)"
+    return res, err
+
+
 def first(*problems):
     return next((p for p in problems if p), None)
 
@@ -213,10 +222,7 @@ def check_ex1(mlp_backward):
         c = case(f"ex1/{seed}", lambda: _make_ex1(sizes, B, scale, seed))
         want, want_dx = c["grads"], c["dx"]
         detail = f"sizes {sizes}, B={B}, seed {seed}"
-        res, err = call(mlp_backward, c["params"], c["hs"], c["dout"])
-        if err is None and not (isinstance(res, tuple) and len(res) == 2
-                                and isinstance(res[0], dict)):
-            err = f"returned {type(res).__name__}, expected a tuple (grads dict, dx)"
+        res, err = call_backward(mlp_backward, c["params"], c["hs"], c["dout"])
         if err:
             rep.case(name, detail, err, hint)
             continue
