@@ -108,12 +108,17 @@ def max_goal_y(n_blocks):
 SAME_SPOT = BLOCK_H - 2 * THRESHOLD
 
 
+def on_same_spot(p, q):
+    """True when goal positions p and q, (x, y) each, are less than SAME_SPOT apart."""
+    return bool(np.hypot(p[0] - q[0], p[1] - q[1]) < SAME_SPOT)
+
+
 def same_spot(goals):
     """The first pair of blocks (a, b) whose goals {block: (x, y)} name the same spot, or None."""
     items = list(goals.items())
-    for i, (a, (xa, ya)) in enumerate(items):
-        for b, (xb, yb) in items[i + 1:]:
-            if math.hypot(xa - xb, ya - yb) < SAME_SPOT:
+    for i, (a, p) in enumerate(items):
+        for b, q in items[i + 1:]:
+            if on_same_spot(p, q):
                 return a, b
     return None
 

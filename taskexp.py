@@ -27,7 +27,7 @@ from tqdm import tqdm
 import agent as agent_lib
 from agent import Agent
 from config import Config  # noqa: F401  (re-exported: taskexp.Config, the settings of a run)
-from env2d import BLOCK_W, N_X, SAME_SPOT, is_success, layer, observation
+from env2d import BLOCK_W, N_X, is_success, layer, observation, on_same_spot
 from report import task_stats
 from rollout import Trajectory, Worlds, physics_pool, run_episodes, success_rate
 
@@ -204,7 +204,7 @@ def random_position(env, rng, others=()):
     while True:
         ix, k = int(rng.integers(len(env.x_bins))), int(rng.integers(len(env.y_bins)))
         x, y = float(env.x_bins[ix]), float(env.y_bins[k])
-        if all(np.hypot(x - ox, y - oy) >= SAME_SPOT for ox, oy in others):
+        if not any(on_same_spot((x, y), other) for other in others):
             return x, y
 
 
