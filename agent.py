@@ -26,7 +26,7 @@ from env2d import BLOCK_H, BLOCK_W, GEOMETRY, TABLE_X, THRESHOLD, layer
 # results change with the thread count. One thread, for every program that imports the agent.
 threadpool_limits(limits=1)
 
-FORMAT_VERSION = 2              # 2: the header records the world's GEOMETRY
+FORMAT_VERSION = 3              # 2: the header records the world's GEOMETRY; 3: its features
 N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the table
 
 
@@ -126,31 +126,43 @@ def clip_grad_norm(grads, max_norm):
 
 # The feature layout: (name, width) of each column group, in order; n_y is the number of layers.
 # Tests and notebooks find a feature by name (feature_columns), never by its column number.
-def feature_layout(n_y):
-    return [("x", 1), ("y", 1), ("cos", 1), ("sin", 1), ("has_goal", 1), ("goal_x", 1),
-            ("goal_y", 1), ("to_goal_x", 1), ("to_goal_y", 1), ("at_goal", 1),
-            ("layer", n_y), ("goal_layer", n_y), ("x_rbf", N_RBF), ("goal_x_rbf", N_RBF),
-            *[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
+# The features: "plain" (what one block and its goal are) or "relations" (plus RELATIONS,
+# stacking preconditions computed by hand, which a network over plain features must learn).
+FEATURES = ("plain", "relations")
 
 
-def feature_columns(n_y):
+def feature_layout(n_y, features="relations"):
+    plain = [("x", 1), ("y", 1), ("cos", 1), ("sin", 1), ("has_goal", 1), ("goal_x", 1),
+             ("goal_y", 1), ("to_goal_x", 1), ("to_goal_y", 1), ("at_goal", 1),
+             ("layer", n_y), ("goal_layer", n_y), ("x_rbf", N_RBF), ("goal_x_rbf", N_RBF)]
+    if features == "plain":
+        return plain
+    return plain + [*[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
+
+
+def feature_columns(n_y, features="relations"):
     """{feature name: slice of its columns} for features made with n_y layers."""
     out, start = {}, 0
-    for name, width in feature_layout(n_y):
+    for name, width in feature_layout(n_y, features):
         out[name], start = slice(start, start + width), start + width
     return out
 
 
-def featurize(obs, n_y=None):
+def featurize(obs, n_y=None, features="relations"):
     """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, F), laid out as
-    feature_layout(n_y) says (F = 15 + 2 n_y + 3 N_RBF).
+    feature_layout(n_y, features) says (F = 10 + 2 n_y + 2 N_RBF plain, 15 + 2 n_y + 3 N_RBF
+    with the relations).
 
     Besides normalised pose, goal and offset to goal, each block gets one-hot codes of its layer
-    and goal layer and RBF codes of its x and goal x.  Mean/max pooling of their embeddings then
-    gives every block a map of where the blocks and goals are, which it needs to decide where
-    a support must go.  Goal columns are multiplied by has_goal, so "no goal" is all zeros.
-    The world's geometry comes from env2d.
+    and goal layer and RBF codes of its x and goal x: what it is and where it wants to be, on
+    its own. Which block rests under which, or whose goal lies on whose, is a relation between
+    two blocks: features="relations" adds hand-computed ones (RELATIONS); with "plain" the
+    network must find them itself (self-attention compares every pair of blocks).
+    Goal columns are multiplied by has_goal, so "no goal" is all zeros. The world's geometry
+    comes from env2d.
     """
+    if features not in FEATURES:
+        raise ValueError(f"features {features!r}: one of {FEATURES}")
     obs = np.asarray(obs, dtype=np.float64)
     if obs.ndim != 3 or obs.shape[-1] != 6:
         raise ValueError(f"obs must have shape (B, n, 6), got {obs.shape}")
@@ -166,10 +178,12 @@ def featurize(obs, n_y=None):
     at_goal = g * (dist < THRESHOLD)
     cols = [(x - mid) / half, y / (n_y * h), np.cos(ang), np.sin(ang), g,
             g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h, at_goal]
+    plain = [np.stack(cols, -1), onehot_layer(y), g[..., None] * onehot_layer(gy), rbf(x),
+             g[..., None] * rbf(gx)]
+    if features == "plain":
+        return np.concatenate(plain, axis=-1)
     rel = relations(x, y, gx, gy, g, at_goal)
-    return np.concatenate([np.stack(cols, -1), onehot_layer(y), g[..., None] * onehot_layer(gy),
-                           rbf(x), g[..., None] * rbf(gx),
-                           np.stack([rel[name] for name in RELATIONS], -1),
+    return np.concatenate([*plain, np.stack([rel[name] for name in RELATIONS], -1),
                            rel["needs_support"][..., None] * rbf(gx)], axis=-1)
 
 
@@ -618,7 +632,13 @@ NETWORKS = {"setnet": SetNet, "attention": AttentionNet}
 
 class Agent:
     """Policy pi(b, x, y | s, g) and value V(s, g): two networks (SetNets, or AttentionNets with
-    network="attention") with separate Adam states.
+    network="attention") with separate Adam states, over featurize's plain features or, with
+    features="relations", the hand-computed relations too.
+
+    n_y is the size of the policy's y head: the world's layers (the default), or 1 for a world
+    that drops blocks (env2d.BlockWorld(drop=True)). The features always code n_blocks layers.
+    The defaults are the deep set with hand relations that the exercises train; a run builds its
+    agent from its Config with taskexp.make_agent.
 
     mlp_backward(params, hs, dout) -> (grads, dx) is the backward pass of every MLP in them, and
     action_dist the class of the policy's distribution (default ActionDist): the library's, or a
@@ -626,7 +646,7 @@ class Agent:
     """
 
     def __init__(self, n_blocks=6, n_x=37, n_y=None, hidden=128, seed=0, mlp_backward=mlp_backward,
-                 dtype="float64", action_dist=None, network="setnet"):
+                 dtype="float64", action_dist=None, network="setnet", features="relations"):
         self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
         self.n_y = self.n_blocks if n_y is None else int(n_y)
         self.dtype, self.action_dist = np.dtype(dtype), action_dist or ActionDist
@@ -635,7 +655,8 @@ class Agent:
         if network not in NETWORKS:
             raise ValueError(f"network {network!r}: one of {sorted(NETWORKS)}")
         self.network, Net = network, NETWORKS[network]
-        F = featurize(np.zeros((1, self.n_blocks, 6)), self.n_y).shape[-1]
+        self.feature_set = features
+        F = self.features(np.zeros((1, self.n_blocks, 6))).shape[-1]
         self.actor = Net(F, hidden, 1 + self.n_x + self.n_y, seed=[seed, 0], out_scale=0.01,
                          mlp_backward=mlp_backward, dtype=self.dtype)
         self.critic = Net(F, hidden, 1, seed=[seed, 1], mlp_backward=mlp_backward,
@@ -648,7 +669,7 @@ class Agent:
         obs = np.asarray(obs, dtype=np.float64)
         if obs.ndim != 3 or obs.shape[1:] != (self.n_blocks, 6):
             raise ValueError(f"obs must have shape (B, {self.n_blocks}, 6), got {obs.shape}")
-        return featurize(obs, self.n_y).astype(self.dtype, copy=False)
+        return featurize(obs, self.n_blocks, self.feature_set).astype(self.dtype, copy=False)
 
     def _batched(self, obs):
         obs = np.asarray(obs, dtype=np.float64)
@@ -809,8 +830,8 @@ class Agent:
     def save(self, path, extra=None):
         """Write the parameters plus a header and any `extra` arrays as a plain .npz (save_npz).
         The header is what load needs to rebuild the agent: "format_version", "sizes" (n_blocks,
-        n_x, n_y, hidden), "dtype" (float32 or float64), "network" and "geometry", the
-        world's env2d.GEOMETRY that the features assume."""
+        n_x, n_y, hidden), "dtype" (float32 or float64), "network", "features" and "geometry",
+        the world's env2d.GEOMETRY that the features assume."""
         save_npz(path, {**self.header(), **self.state_dict(), **(extra or {})})
 
     def header(self):
@@ -818,6 +839,7 @@ class Agent:
                 "sizes": np.array([self.n_blocks, self.n_x, self.n_y, self.hidden], dtype=np.int64),
                 "dtype": np.array(self.dtype.name),
                 "network": np.array(self.network),
+                "features": np.array(self.feature_set),
                 "geometry": np.array(list(GEOMETRY.values()), dtype=np.float64)}
 
     @classmethod
@@ -850,7 +872,10 @@ class Agent:
         network = str(data.get("network", ""))
         if network not in NETWORKS:
             raise ValueError(f"{path}: network {network!r}, expected one of {sorted(NETWORKS)}")
-        agent = cls(n_blocks, n_x, n_y, hidden, dtype=dtype, network=network)
+        features = str(data.get("features", ""))
+        if features not in FEATURES:
+            raise ValueError(f"{path}: features {features!r}, expected one of {FEATURES}")
+        agent = cls(n_blocks, n_x, n_y, hidden, dtype=dtype, network=network, features=features)
         params, extra = agent.state_dict(), set(extra)
         missing = extra - set(data)
         if missing:

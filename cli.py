@@ -26,7 +26,6 @@ from tqdm import tqdm
 import report
 import taskexp
 from agent import Agent
-from env2d import N_X
 from taskexp import SHAPES, Config, RunState
 
 # --------------------------------------------------------------------------------------------
@@ -35,7 +34,8 @@ from taskexp import SHAPES, Config, RunState
 
 CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",),
            "shapes": tuple(SHAPES), "dtype": ("float32", "float64"),
-           "network": ("setnet", "attention")}
+           "network": ("setnet", "attention"), "features": ("plain", "relations"),
+           "action": ("drop", "place")}
 MIN_ZERO = {"seed", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add"}
 AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
 SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes")
@@ -248,7 +248,7 @@ def save_state(path, agent, run, rng):
 def load_state(path, cfg, rng):
     """Read what save_state wrote for a run with settings cfg; restore rng -> (agent, RunState).
     ValueError naming the file when it is unreadable or from other settings."""
-    template = Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, dtype=cfg.dtype, network=cfg.network)
+    template = taskexp.make_agent(cfg)
     saved, data = Agent.load(path, extra=STATE_KEYS + tuple(template.training_state()))
     if int(data["state_version"]) != STATE_VERSION:
         raise ValueError(f"{path}: state_version {data['state_version']}, expected {STATE_VERSION}")

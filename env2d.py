@@ -5,13 +5,15 @@ The world of "Self-Generating Data for Goal-Conditioned Compositional Problems" 
 under gravity. One action picks a block up and puts it down somewhere else: the block is teleported
 to the centre of an x-bin (37 bins a quarter block apart) in a layer (y-bin, one block height
 each), with angle 0 and no velocity, and then physics runs until everything rests. A pose that
-overlaps another block makes the action a no-op -- the hand never pushes. A block put in mid air
-falls; a block put half over an edge may topple; a block that falls off the table lands on a catch
-floor half a metre below and stays in the state (its y is negative). A task is a set of goals
-{block: (x, y)}; it is solved when every goal block rests within THRESHOLD of its target. The state
-is the array (n_blocks, 6) of x, y, angle, vx, vy, w, and the physics is reset to it at every step
-(as good as a new pymunk Space, see BlockWorld._load), so a step depends on (state, action) alone,
-bit for bit: a saved state replays exactly.
+overlaps another block makes the action a no-op -- the hand never pushes. A world made with
+drop=True takes no layer: the block is let go just above whatever lies under its x, so the
+same action lands on the table, on one block or on a tower of five (see drop_height). A block
+put in mid air falls; a block put half over an edge may topple; a block that falls off the table
+lands on a catch floor half a metre below and stays in the state (its y is negative). A task is
+a set of goals {block: (x, y)}; it is solved when every goal block rests within THRESHOLD of its
+target. The state is the array (n_blocks, 6) of x, y, angle, vx, vy, w, and the physics is reset
+to it at every step (as good as a new pymunk Space, see BlockWorld._load), so a step depends on
+(state, action) alone, bit for bit: a saved state replays exactly.
 """
 import math
 
@@ -159,6 +161,19 @@ def overlap_depth(pose, others):
     return np.array(depth)
 
 
+def drop_height(x, others):
+    """Where a block let go at x comes to lie, before physics: its centre just above the highest
+    of the blocks `others` (m, >=3: x, y, angle) that it would hit falling straight down, or on
+    the table. A block's reach is its bounding box, r = W/2 |cos| + H/2 |sin| across and
+    W/2 |sin| + H/2 |cos| up; blocks that fell off the table lie below it and never count."""
+    top = 0.0
+    for bx, by, angle in np.asarray(others, dtype=float)[:, :3].tolist():
+        cos, sin = abs(math.cos(angle)), abs(math.sin(angle))
+        if abs(bx - x) < BLOCK_W / 2 + BLOCK_W / 2 * cos + BLOCK_H / 2 * sin - 1e-9:
+            top = max(top, by + BLOCK_W / 2 * sin + BLOCK_H / 2 * cos)
+    return top + BLOCK_H / 2
+
+
 def draw_scene(ax, state, goals=None, title=None):
     """Draw a state (n, 6) on a matplotlib Axes: the table, blocks with their ids, goals as dashed
     outlines in their block's colour. Fixed limits, so frames of an episode line up. Returns ax."""
@@ -213,12 +228,16 @@ def animate(states, goals=None, titles=None, fps=2, dpi=60, html=False):
 class BlockWorld(gymnasium.Env):
     """The block world as a Gymnasium environment (see the module docstring).
 
-    action (block, x-bin, y-bin) in MultiDiscrete([n_blocks, N_X, n_blocks]);
+    action (block, x-bin, y-bin) in MultiDiscrete([n_blocks, N_X, n_blocks]): the block is put
+    down at that x in that layer ("place"). With drop=True the action space is
+    MultiDiscrete([n_blocks, N_X, 1]): the block is let go just above whatever lies under that x
+    (the table, or the top of a stack) and physics finds its height ("drop"), so one skill,
+    "drop a block on its goal x", serves every height.
     observation (n_blocks, 6) float32, see observation(); reward 1.0 on success (then terminated).
     """
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
-    def __init__(self, n_blocks=6, max_steps=10, render_mode=None):
+    def __init__(self, n_blocks=6, max_steps=10, render_mode=None, drop=False):
         if not (isinstance(n_blocks, (int, np.integer)) and 2 <= n_blocks <= 8):
             raise ValueError(f"n_blocks={n_blocks!r}: need an int in 2..8 to fit the table")
         if not (isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool)
@@ -226,11 +245,14 @@ class BlockWorld(gymnasium.Env):
             raise ValueError(f"max_steps={max_steps!r}: need an int >= 1 (actions per episode)")
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode={render_mode!r}: only None or 'rgb_array'")
+        if not isinstance(drop, bool):
+            raise ValueError(f"drop={drop!r}: need True (drop at an x) or False (place in a layer)")
         self.n_blocks, self.max_steps, self.render_mode = int(n_blocks), int(max_steps), render_mode
+        self.drop = drop
         self.block_size, self.table_x, self.threshold = (BLOCK_W, BLOCK_H), TABLE_X, THRESHOLD
         self.x_bins = X_BINS.copy()
-        self.y_bins = layer_y(np.arange(self.n_blocks))
-        self.action_space = spaces.MultiDiscrete([self.n_blocks, N_X, self.n_blocks])
+        self.y_bins = layer_y(np.arange(self.n_blocks))          # the layers: where goals lie
+        self.action_space = spaces.MultiDiscrete([self.n_blocks, N_X, 1 if drop else self.n_blocks])
         # Columns x, y, angle, goal_x, goal_y, has_goal. A block that falls off the table lands on
         # the catch floor (10 m wide); none can be higher than max_goal_y; "no goal" is all zeros.
         top = max_goal_y(self.n_blocks)
@@ -288,18 +310,20 @@ class BlockWorld(gymnasium.Env):
         return dict(self._goals)
 
     def encode_action(self, block, x, y):
-        """The action (3,) int64 whose bins are nearest to (x, y) for this block."""
+        """The action (3,) int64 whose bins are nearest to (x, y) for this block (when dropping,
+        y is not part of the action: physics finds it)."""
         if not 0 <= int(block) < self.n_blocks or int(block) != block:
             raise ValueError(f"block {block!r} not in 0..{self.n_blocks - 1}")
         if not (np.isfinite(x) and np.isfinite(y)):
             raise ValueError(f"position ({x!r}, {y!r}) not finite")
         ix, iy = np.abs(self.x_bins - x).argmin(), np.abs(self.y_bins - y).argmin()
-        return np.array([block, ix, iy], np.int64)
+        return np.array([block, ix, 0 if self.drop else iy], np.int64)
 
     def decode_action(self, action):
-        """(block, x, y) of an action (3,): the block id and the centre it is teleported to."""
+        """(block, x, y) of an action (3,): the block id and the centre it is teleported to;
+        y is None when dropping (it depends on what lies under x)."""
         b, ix, iy = self._check_action(action)
-        return b, float(self.x_bins[ix]), float(self.y_bins[iy])
+        return b, float(self.x_bins[ix]), None if self.drop else float(self.y_bins[iy])
 
     def _check_action(self, action):
         a = np.asarray(action)
@@ -393,8 +417,10 @@ class BlockWorld(gymnasium.Env):
         for the worlds of the main process (rollout.PhysicsPool), which then finish_step.
         """
         b, ix, iy = self._check_action(action)
-        pose = (self.x_bins[ix], self.y_bins[iy] + DROP_GAP)
         others = state[np.arange(self.n_blocks) != b, :3]
+        x = self.x_bins[ix]
+        y = drop_height(x, others) if self.drop else self.y_bins[iy]
+        pose = (x, y + DROP_GAP)
         if (overlap_depth(pose, others) > OVERLAP_TOL).any():
             return state, True, None, 0
         start = state.copy()

@@ -17,10 +17,10 @@ from env2d import BlockWorld, observation
 _WORLD = None                  # a worker's own BlockWorld, which simulates for the main process
 
 
-def _start_worker(n_blocks):
+def _start_worker(n_blocks, drop):
     global _WORLD
     signal.signal(signal.SIGINT, signal.SIG_IGN)    # Ctrl-C is the main process's to handle
-    _WORLD = BlockWorld(n_blocks)
+    _WORLD = BlockWorld(n_blocks, drop=drop)
 
 
 def _simulate(job):
@@ -34,10 +34,10 @@ class PhysicsPool:
     A worker whose main process dies (even by SIGKILL) finds its pipe closed and exits.
     """
 
-    def __init__(self, workers, n_blocks):
+    def __init__(self, workers, n_blocks, drop=False):
         self.workers = workers
         context = multiprocessing.get_context("spawn")
-        self._pool = context.Pool(workers, initializer=_start_worker, initargs=(n_blocks,))
+        self._pool = context.Pool(workers, initializer=_start_worker, initargs=(n_blocks, drop))
 
     def simulate(self, states, actions):
         """[(state after, noop, stable, substeps)] for each (state, action), in order."""
@@ -56,17 +56,17 @@ class PhysicsPool:
         self.close()
 
 
-def physics_pool(workers, n_blocks):
+def physics_pool(workers, n_blocks, drop=False):
     """A PhysicsPool for workers > 1; with one, the main process steps the worlds itself."""
-    return PhysicsPool(workers, n_blocks) if workers > 1 else nullcontext()
+    return PhysicsPool(workers, n_blocks, drop) if workers > 1 else nullcontext()
 
 
 class Worlds(list):
     """BlockWorlds that run_episodes steps together: a list, and the PhysicsPool (or None) that
     runs their physics."""
 
-    def __init__(self, n, n_blocks, max_steps, pool=None):
-        super().__init__(BlockWorld(n_blocks, max_steps=max_steps) for _ in range(n))
+    def __init__(self, n, n_blocks, max_steps, pool=None, drop=False):
+        super().__init__(BlockWorld(n_blocks, max_steps=max_steps, drop=drop) for _ in range(n))
         self.pool = pool
 
 

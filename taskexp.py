@@ -441,6 +441,13 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
     return {**record, **stats}
 
 
+def make_agent(cfg, mlp_backward=agent_lib.mlp_backward):
+    """The untrained agent of a run with settings cfg (its network, features and action heads)."""
+    return Agent(cfg.n_blocks, n_x=N_X, n_y=1 if cfg.action == "drop" else cfg.n_blocks,
+                 hidden=cfg.hidden, seed=cfg.seed, mlp_backward=mlp_backward, dtype=cfg.dtype,
+                 network=cfg.network, features=cfg.features)
+
+
 def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=silent, log=print,
           workers=1):
     """Base skills (round 0), then cfg.rounds rounds of task expansion and self-distillation, each
@@ -452,13 +459,12 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
     """
     pieces = pieces or Pieces()
     rng = np.random.default_rng(cfg.seed) if rng is None else rng
-    if agent is None:
-        agent = Agent(cfg.n_blocks, n_x=N_X, hidden=cfg.hidden, seed=cfg.seed,
-                      mlp_backward=pieces.mlp_backward, dtype=cfg.dtype, network=cfg.network)
+    agent = agent or make_agent(cfg, pieces.mlp_backward)
     run = run or RunState(results=dict(config=asdict(cfg), rounds=[], wallclock={}))
-    with physics_pool(workers, cfg.n_blocks) as pool:
-        envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool)
-        short_envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool)
+    drop = cfg.action == "drop"
+    with physics_pool(workers, cfg.n_blocks, drop) as pool:
+        envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool, drop)
+        short_envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool, drop)
         evals = eval_tasks(cfg, envs[0])
         for k in range(run.last_round + 1, cfg.rounds + 1):
             with phase(f"round {k}"):

@@ -227,6 +227,28 @@ def test_featurize_codes():
     assert f[1, col["x_rbf"]].argmax() == 14 and f[1, col["goal_x_rbf"]].argmax() == 6
 
 
+def test_plain_features_are_the_relations_features_without_the_relations(tmp_path):
+    """features="plain" drops exactly the hand-computed columns; the checkpoint remembers which
+    features its networks were trained on, and a one-block drop head (n_y = 1) round-trips."""
+    obs = random_obs(np.random.default_rng(5), 3)
+    plain, full = featurize(obs, 6, "plain"), featurize(obs, 6, "relations")
+    assert plain.shape[-1] == 10 + 2 * 6 + 2 * 21
+    assert np.array_equal(plain, full[..., : plain.shape[-1]])
+    assert set(feature_columns(6)) - set(feature_columns(6, "plain")) == {*RELATIONS,
+                                                                          "support_wanted_rbf"}
+    agent = Agent(hidden=8, n_y=1, network="attention", features="plain")
+    assert agent.features(obs).shape == plain.shape and agent.act(obs).shape == (3, 3)
+    assert (agent.act(obs)[:, 2] == 0).all()
+    agent.save(tmp_path / "p.npz")
+    again = Agent.load(tmp_path / "p.npz")
+    assert (again.feature_set, again.network, again.n_y) == ("plain", "attention", 1)
+    assert np.array_equal(again.value(obs), agent.value(obs))
+    with pytest.raises(ValueError, match="features 'hand'"):
+        featurize(obs, 6, "hand")
+    with pytest.raises(ValueError, match="features 'hand'"):
+        Agent(hidden=8, features="hand")
+
+
 def relation_table(x, y, gx, gy, g):
     """relations() for one scene of 3 blocks, as {name: list of 3 floats}."""
     rel = relations(*(np.array([v], float) for v in (x, y, gx, gy, g)), np.zeros((1, 3)))
@@ -321,11 +343,12 @@ def test_load_rejects_bad_files(tmp_path):
     np.savez(tmp_path / "world.npz",
              **{**data, "geometry": data["geometry"] * [1, 2, 1, 1, 1, 1, 1]})
     np.savez(tmp_path / "state.npz", **{**data, "state_version": np.array(1)})
+    np.savez(tmp_path / "features.npz", **{**data, "features": np.array("hand")})
     for name, msg in [("truncated.npz", "readable"), ("garbage.npz", "readable"),
                       ("notes.txt", "not a checkpoint"), ("version.npz", "99"),
                       ("sizes.npz", "sizes"), ("shape.npz", "actor.rho.W1"),
                       ("missing.npz", "critic.phi.b0"), ("world.npz", r"'block_h': \(0.1, 0.05\)"),
-                      ("state.npz", r"round\{k\}.npz")]:
+                      ("state.npz", r"round\{k\}.npz"), ("features.npz", "features 'hand'")]:
         with pytest.raises(ValueError, match=msg) as e:
             Agent.load(tmp_path / name)
         assert name in str(e.value) and "allow_pickle" not in str(e.value)

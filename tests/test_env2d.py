@@ -212,6 +212,35 @@ def test_batch_read_matches_the_bodies(env):
     assert np.array_equal(env._read(), np.array(rows))
 
 
+def test_drop_lets_physics_find_the_height():
+    """drop=True: one action (block, x) builds a tower of any height, and a block let go at the
+    edge of a stack rests on the stack's top, or beside it on the table."""
+    env = BlockWorld(6, drop=True)
+    assert env.action_space.nvec.tolist() == [6, 37, 1]
+    goals = {b: (0.05, (k + 0.5) * BLOCK_H) for k, b in enumerate([3, 0, 1, 2])}   # x of block 3
+    env.reset(options={"state": flat_state(SPREAD), "goals": goals})
+    for b in (0, 1, 2):
+        _, reward, terminated, _, info = env.step(env.encode_action(b, 0.05, 123.0))   # y ignored
+        assert not info["noop"] and info["stable"]
+    assert reward == 1.0 and terminated and is_success(env.get_state(), goals)
+    assert env.decode_action([2, 18, 0]) == (2, 0.0, None)
+    # drop_height: above what a falling block would hit, the table where there is nothing
+    others = env.get_state()[[3, 0, 1, 4], :3]        # the tower (each block sinks 1 mm), block 4
+    assert env2d.drop_height(0.05 + 0.0999, others) == pytest.approx(3.5 * BLOCK_H, abs=5e-3)
+    assert env2d.drop_height(0.125, others) == pytest.approx(3.5 * BLOCK_H, abs=5e-3)   # both
+    assert env2d.drop_height(0.06 + BLOCK_W, others[:3]) == BLOCK_H / 2       # side by side
+    with pytest.raises(ValueError, match="drop"):
+        BlockWorld(6, drop="yes")
+
+
+def test_drop_on_a_tilted_block_uses_its_bounding_box():
+    tilted = np.array([[0.0, np.hypot(BLOCK_W, BLOCK_H) / 2, np.arctan2(BLOCK_H, BLOCK_W)]])
+    top = tilted[0, 1] + (BLOCK_W * np.sin(tilted[0, 2]) + BLOCK_H * np.cos(tilted[0, 2])) / 2
+    assert env2d.drop_height(0.0, tilted) == pytest.approx(top + BLOCK_H / 2)
+    fallen = np.array([[0.0, -0.47, 0.0]])                         # on the catch floor: no support
+    assert env2d.drop_height(0.0, fallen) == BLOCK_H / 2
+
+
 def test_encode_decode_round_trip(env):
     for a in np.stack(np.meshgrid(range(6), range(37), range(6)), -1).reshape(-1, 3):
         b, x, y = env.decode_action(a)

@@ -128,6 +128,18 @@ def test_same_seed_same_results_different_seed_different(tmp_path):
     assert files[0] != files[2]
 
 
+@pytest.mark.parametrize("flags, network, features, n_y", [
+    ([], "attention", "plain", 1),                        # the defaults: drop, learn relations
+    (["--network", "setnet", "--features", "relations", "--action", "place", "--warmup", "8"],
+     "setnet", "relations", 6)])                           # the earlier defaults, as options
+def test_cli_network_features_and_action_reach_the_agent(tmp_path, flags, network, features, n_y):
+    out, res = run_cli(tmp_path, *flags)
+    agent = Agent.load(os.path.join(out, "round1.npz"))
+    assert (agent.network, agent.feature_set, agent.n_y) == (network, features, n_y)
+    assert res["config"]["action"] == ("drop" if n_y == 1 else "place")
+    assert agent.features(np.zeros((1, 6, 6))).shape[-1] == (64 if features == "plain" else 90)
+
+
 @pytest.mark.parametrize("flags", [["--select", "init2new", "--no-restrict"],
                                    ["--baseline", "direct-ppo"]])
 def test_cli_ablations_run(tmp_path, flags):

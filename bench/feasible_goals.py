@@ -1,0 +1,71 @@
+"""Does equation (1) pick goals the policy can reach? A diagnostic of V(s, g) for one checkpoint.
+
+    python bench/feasible_goals.py runs/ours-seed0/round0.npz
+    python bench/feasible_goals.py runs/relations/ours-seed0/round0.npz
+
+Runs the checkpoint's policy on fresh base tasks (sec 4.1), and for every success s0 -> sT draws K
+one-alteration candidates and picks g* by equation (1), as task_expansion does. A candidate is
+called *feasible* when every goal not yet met at sT has its support in place (agent.relations:
+nothing in its spot, and the table or a block right under it), so one drop can meet it. The
+hand-computed relations only judge here; the agent may never have seen them. Prints the share of
+feasible goals among all candidates and among the chosen ones, and how often the verification
+run from sT (cfg.short_steps actions) reaches g*, for feasible and infeasible picks.
+"""
+import argparse
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+import taskexp  # noqa: E402
+from agent import Agent, relations  # noqa: E402
+from env2d import THRESHOLD, is_success, observation  # noqa: E402
+from rollout import Worlds, run_episodes  # noqa: E402
+
+
+def feasible(state, goals):
+    """Every goal of `goals` not met in `state` can be met by one drop (see the module doc)."""
+    o = observation(state, goals)[None].astype(np.float64)
+    x, y, gx, gy, g = (o[..., j] for j in (0, 1, 3, 4, 5))
+    rel = relations(x, y, gx, gy, g, g * (np.hypot(gx - x, gy - y) < THRESHOLD))
+    return rel["needs_support"].max() == 0 and rel["blocked"].max() == 0
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("checkpoint")
+    p.add_argument("--tasks", type=int, default=600, help="base tasks to start from")
+    p.add_argument("--seed", type=int, default=5)
+    a = p.parse_args()
+    agent = Agent.load(a.checkpoint)
+    cfg = taskexp.Config(features=agent.feature_set, network=agent.network,
+                         action="drop" if agent.n_y == 1 else "place")
+    rng = np.random.default_rng(a.seed)
+    drop = cfg.action == "drop"
+    envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, drop=drop)
+    short = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, drop=drop)
+    tasks, _, _ = taskexp.base_demos(cfg, envs[0], rng, a.tasks)
+    found = [t for t in run_episodes(agent, tasks, envs, rng) if t.success]
+    share, chosen = [], []
+    for t in found:
+        sT = t.states[-1]
+        cands = [taskexp.alter(t.goals, envs[0], rng, cfg.restrict, cfg.p_add)
+                 for _ in range(cfg.candidates)]
+        cands = [g for g in cands if not is_success(sT, g)] or cands
+        i, _ = taskexp.select_goal(agent, t.states[0], sT, cands, cfg.select)
+        ok = [feasible(sT, g) for g in cands]
+        share.append(np.mean(ok))
+        chosen.append((cands[i], ok[i]))
+    runs = run_episodes(agent, [(t.states[-1], g) for t, (g, _) in zip(found, chosen)], short, rng)
+    reached = np.array([r.success for r in runs])
+    picked = np.array([ok for _, ok in chosen])
+    print(f"{a.checkpoint}: {len(found)} of {len(tasks)} base tasks solved; K = {cfg.candidates}")
+    print(f"  feasible among all candidates  {100 * np.mean(share):.0f}%")
+    print(f"  feasible among the chosen g*   {100 * picked.mean():.0f}%")
+    print(f"  g* reached from sT: {100 * reached.mean():.0f}% (feasible picks "
+          f"{100 * reached[picked].mean():.0f}%, infeasible {100 * reached[~picked].mean():.0f}%)")
+
+
+if __name__ == "__main__":
+    main()

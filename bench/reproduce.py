@@ -1,0 +1,239 @@
+"""The reproduction report: the paper's Tables 1-3 and Figures 1-2 next to ours, over seeds.
+
+    python bench/reproduce.py                     # 3 seeds, both feature sets: writes RESULTS.md
+    python bench/reproduce.py --seeds 0 --features plain --scale 0.2     # a quick look
+
+Runs the method ("ours"), the direct-PPO baseline and the ablations of Table 3 (end2new, init2new,
+w/o restriction; for --ablation-rounds, default 1: the paper's Table 3 is after round 1) with the
+default settings, once with the plain features that self-attention
+learns from (the default) and once with the hand-computed relations (--features relations).
+Each run is one `taskexp.py` process through bench/run_seeds.py: finished runs are reused and
+stopped ones resumed, so a stopped report goes on where it was. Runs of the default features go
+to runs/<variant>-seed<k> (where the notebooks look), the others to runs/<features>/...
+Writes RESULTS.md (mean +- std over seeds, the targets of the issue checked against them, the
+machine and the wall-clock time), its figures in results/, and appends bench/discussion.md, the
+team's reading of the numbers, which is written by hand.
+"""
+import argparse
+import os
+import platform
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+from matplotlib.figure import Figure
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from run_seeds import pm, run_one  # noqa: E402
+
+from config import Config  # noqa: E402
+
+# The paper's numbers (shared/paper/README.md): Table 1 by round 1-3, Table 2 by round 1-3,
+# Table 3 after round 1; direct PPO: 0% on every shape (sec 5.3).
+PAPER_T1 = {"high_goal_tasks": [12, 18, 938], "mean_episode_length": [2.5, 5, 7.6]}
+PAPER_T2 = {"I": [93.7, 95.6, 89.3], "Y": [1.5, 33.5, 43.8], "3T": [58.2, 93.5, 98.2]}
+PAPER_T3 = {"no-restrict": [0.3, 4.1, 38.7], "init2new": [7.3, 0.0, 0.0],
+            "end2new": [79.4, 20.3, 59.4], "ours": [93.7, 1.0, 58.2],
+            "direct-ppo": [0.0, 0.0, 0.0]}
+VARIANTS = ("ours", "direct-ppo", "end2new", "init2new", "no-restrict")
+NAMES = {"ours": "ours: argmax V(sT, g) - V(s0, g)", "end2new": "end2new: argmax V(sT, g)",
+         "init2new": "init2new: argmin V(s0, g)", "no-restrict": "w/o restriction",
+         "direct-ppo": "direct PPO on the evaluation tasks"}
+
+
+def paper(values, k, digits=1, unit="%"):
+    """The paper's figure for round k (1-based), or a dash where it has none."""
+    return f"{values[k - 1]:.{digits}f}{unit}" if 1 <= k <= len(values) else "-"
+
+
+def mean_layer(hist):
+    """Mean highest-goal layer of a round's tasks, from its histogram (layer 0 = the table)."""
+    return float(np.average(np.arange(len(hist)), weights=hist)) if sum(hist) else 0.0
+
+
+def success(run, k, shape=None):
+    """Zero-shot success (%) of a run after round k: one shape, or the mean over the shapes."""
+    ev = run["rounds"][k]["eval"]
+    return 100 * (ev[shape] if shape else np.mean(list(ev.values())))
+
+
+def table1(runs, rounds):
+    out = ["| round | generated tasks | # high goals (>= 3 above ground) | paper | mean episode "
+           "length | paper | mean highest goal layer |", "|---|---|---|---|---|---|---|"]
+    for k in range(rounds + 1):
+        rows = [r["rounds"][k] for r in runs]
+        out.append(f"| {k}{' (base)' if k == 0 else ''} | {pm([w['tasks'] for w in rows])} | "
+                   f"{pm([w['high_goal_tasks'] for w in rows])} | "
+                   f"{paper(PAPER_T1['high_goal_tasks'], k, 0, '')} | "
+                   f"{pm([w['mean_episode_length'] for w in rows], '', 2)} | "
+                   f"{paper(PAPER_T1['mean_episode_length'], k, 1, '')} | "
+                   f"{pm([mean_layer(w['max_height_hist']) for w in rows], '', 2)} |")
+    return out
+
+
+def table2(runs, rounds, shapes, with_paper=True):
+    head = "".join(f" {s} |" + (" paper |" if with_paper else "") for s in shapes)
+    out = [f"| round |{head} mean over shapes |",
+           "|---" * (2 + len(shapes) * (1 + with_paper)) + "|"]
+    for k in range(rounds + 1):
+        cells = "".join(f" {pm([success(r, k, s) for r in runs], '%')} |"
+                        + (f" {paper(PAPER_T2.get(s, []), k)} |" if with_paper else "")
+                        for s in shapes)
+        out.append(f"| {k} |{cells} {pm([success(r, k) for r in runs], '%')} |")
+    return out
+
+
+def table3(by_variant, k, shapes):
+    out = [f"| after round {k} |" + "".join(f" {s} | paper |" for s in shapes) + " mean |",
+           "|---" * (2 + 2 * len(shapes)) + "|"]
+    for v, runs in by_variant.items():
+        cells = "".join(f" {pm([success(r, k, s) for r in runs], '%')} | "
+                        f"{PAPER_T3[v][i]:.1f}% |" for i, s in enumerate(shapes))
+        out.append(f"| {NAMES[v]} |{cells} {pm([success(r, k) for r in runs], '%')} |")
+    return out
+
+
+def figure(runs, rounds, key, first_bin, xlabel, path):
+    """A round-by-round bar chart of a task histogram (fractions), mean over seeds, std as bars."""
+    fig = Figure(figsize=(5.5, 3.2))
+    ax = fig.add_subplot()
+    width = 0.8 / (rounds + 1)
+    for k in range(rounds + 1):
+        fr = np.array([np.array(r["rounds"][k][key], float) / max(sum(r["rounds"][k][key]), 1)
+                       for r in runs])
+        x = np.arange(fr.shape[1]) + first_bin + (k - rounds / 2) * width
+        ax.bar(x, fr.mean(0), width, yerr=fr.std(0), label=f"round {k}" + (" (base)" if k == 0
+                                                                            else ""))
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("fraction of generated tasks")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+
+
+def targets(by_variant, rounds, shapes):
+    """The issue's targets, each with what was measured and whether it holds (on seed means)."""
+    ours = by_variant["ours"]
+    layers = [np.mean([mean_layer(r["rounds"][k]["max_height_hist"]) for r in ours])
+              for k in range(1, rounds + 1)]
+    high = [np.mean([r["rounds"][k]["high_goal_tasks"] for r in ours]) for k in (1, rounds)]
+    zs = [np.mean([success(r, k) for r in ours]) for k in (1, rounds)]
+    per_shape = {s: [np.mean([success(r, k, s) for r in ours]) for k in (1, rounds)]
+                 for s in shapes}
+    out = [("mean highest-goal layer of generated tasks rises every round (rounds 1..%d)" % rounds,
+            " -> ".join(f"{v:.2f}" for v in layers), all(np.diff(layers) > 0)),
+           (f"tasks with >= 3 high goals grow >= 5x from round 1 to {rounds}",
+            f"{high[0]:.0f} -> {high[1]:.0f}", high[1] >= 5 * high[0] and high[1] > 0),
+           (f"zero-shot success rises from round 1 to {rounds} on every shape",
+            ", ".join(f"{s} {a:.0f}% -> {b:.0f}%" for s, (a, b) in per_shape.items()),
+            all(b > a for a, b in per_shape.values())),
+           (f"round-{rounds} mean over shapes >= 77% (the paper's round-3 mean)",
+            f"{zs[1]:.0f}%", zs[1] >= 77)]
+    if "direct-ppo" in by_variant:
+        worst = {s: max(success(r, k, s) for r in by_variant["direct-ppo"]
+                        for k in range(1, rounds + 1)) for s in shapes}
+        out.append(("direct PPO <= 10% on every shape, every round (highest seed shown)",
+                    ", ".join(f"{s} {v:.0f}%" for s, v in worst.items()),
+                    max(worst.values()) <= 10))
+    for v in ("no-restrict", "init2new"):
+        if v in by_variant:
+            for k in sorted({1, len(by_variant[v][0]["rounds"]) - 1}):
+                a, b = (np.mean([success(r, k) for r in by_variant[x]]) for x in ("ours", v))
+                out.append((f"ours >= {NAMES[v]} on the mean over shapes, round {k}",
+                            f"{a:.0f}% vs {b:.0f}%", a >= b))
+    return ["| target | measured (mean over seeds) | |", "|---|---|---|"] + \
+        [f"| {t} | {m} | {'met' if ok else '**missed**'} |" for t, m, ok in out]
+
+
+def machine():
+    cpu = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as f:
+            cpu = next(line.split(":", 1)[1].strip() for line in f if "model name" in line)
+    except (OSError, StopIteration):
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, {platform.system()}, Python {platform.python_version()}"
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
+    p.add_argument("--features", nargs="+", default=["plain", "relations"],
+                   choices=["plain", "relations"])
+    p.add_argument("--variants", nargs="+", choices=VARIANTS, default=list(VARIANTS))
+    p.add_argument("--rounds", type=int, default=Config.rounds)
+    p.add_argument("--ablation-rounds", type=int, default=1,
+                   help="rounds of end2new, init2new and w/o restriction (Table 3)")
+    p.add_argument("--root", default="runs")
+    p.add_argument("--jobs", type=int, default=2, help="runs at a time (one core each)")
+    p.add_argument("--scale", default=None, help="passed to taskexp.py (smaller budgets)")
+    p.add_argument("--out", default="RESULTS.md")
+    p.add_argument("--figures", default="results", help="folder for the figures")
+    a = p.parse_args()
+    if "ours" not in a.variants:
+        p.error("--variants must include ours: every table compares with it")
+    os.makedirs(a.figures, exist_ok=True)
+    shapes = list(Config.shapes)
+    start = time.time()
+    jobs = [(f, v, s) for f in a.features for v in a.variants for s in a.seeds]
+
+    def one(job):
+        f, v, s = job
+        root = a.root if f == Config.features else os.path.join(a.root, f)
+        os.makedirs(root, exist_ok=True)
+        extra = ["--features", f] + (["--scale", a.scale] if a.scale else [])
+        rounds = a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
+        print(f"[{time.time() - start:5.0f}s] {f} {v} seed {s}", flush=True)
+        return job, run_one(v, s, rounds, root, extra)[2]
+
+    with ThreadPoolExecutor(a.jobs) as pool:
+        done = dict(pool.map(one, jobs))
+    seeds = " ".join(map(str, a.seeds))
+    cmd = "python bench/reproduce.py " + " ".join(sys.argv[1:])
+    md = ["# Reproduction report", "",
+          f"Written by `{cmd.strip()}` on {time.strftime('%Y-%m-%d')}: the default settings "
+          f"(`python taskexp.py --rounds {a.rounds}`" + (f" --scale {a.scale}" if a.scale else "")
+          + f"), seeds {seeds}, every figure mean +- std over the seeds. Machine: {machine()}. "
+          "Results differ between machines (BLAS kernels differ), so compare spreads, not one "
+          "seed's digits.", ""]
+    for f in a.features:
+        by_variant = {v: [done[(f, v, s)] for s in a.seeds] for v in a.variants}
+        ours = by_variant["ours"]
+        clock = {v: pm([r["wallclock"]["total_s"] for r in runs]) for v, runs in by_variant.items()}
+        title = {"plain": "self-attention over plain features (the default)",
+                 "relations": "hand-computed relations (--features relations)"}[f]
+        md += [f"## {title}", "",
+               "Wall-clock per run, seconds (two runs at a time, one worker each): "
+               + ", ".join(f"{v} {c}" for v, c in clock.items()) + ".", "",
+               "### Targets", "", *targets(by_variant, a.rounds, shapes), "",
+               "### Table 1: generated tasks (ours)", "", *table1(ours, a.rounds), ""]
+        for key, name, first, xlabel in (("max_height_hist", "fig1", 0, "highest goal (layer)"),
+                                         ("goal_count_hist", "fig2", 1, "number of goals")):
+            path = os.path.join(a.figures, f"{name}_{f}.png")
+            figure(ours, a.rounds, key, first, xlabel, path)
+            what = {"fig1": "Figure 1: highest goal of the generated tasks",
+                    "fig2": "Figure 2: number of goals of the generated tasks"}[name]
+            md += [f"{what}:", "", f"![{what}]({path})", ""]
+        md += ["### Table 2: zero-shot success (ours)", "", *table2(ours, a.rounds, shapes), ""]
+        if "direct-ppo" in by_variant:
+            md += ["### Direct PPO on the evaluation tasks (sec 5.3; paper: 0%)", "",
+                   *table2(by_variant["direct-ppo"], a.rounds, shapes, with_paper=False), ""]
+        md += ["### Table 3: goal selection and the restriction", ""]
+        for k in sorted({1, min(a.rounds, a.ablation_rounds)}):
+            md += [*table3(by_variant, k, shapes), ""]
+    runs_s = sum(r["wallclock"]["total_s"] for r in done.values())
+    md += [f"The {len(done)} runs took {runs_s:.0f} s of wall-clock in all, run {a.jobs} at a "
+           f"time; this invocation took {time.time() - start:.0f} s (finished runs are reused).",
+           ""]
+    notes = os.path.join(os.path.dirname(os.path.abspath(__file__)), "discussion.md")
+    if os.path.exists(notes):
+        with open(notes) as fh:
+            md += [fh.read()]
+    with open(a.out, "w") as fh:
+        fh.write("\n".join(md))
+    print(f"wrote {a.out} and the figures in {a.figures}/")
+
+
+if __name__ == "__main__":
+    main()
