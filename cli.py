@@ -62,7 +62,8 @@ def parser():
     docs, d = field_docs(Config), Config()
     for f in fields(Config):
         default = getattr(d, f.name)
-        kw = dict(default=None, dest=f.name, help=f"{docs.get(f.name, '')} (default {default!r})")
+        text = docs.get(f.name, "").replace("%", "%%")            # argparse formats help with %
+        kw = dict(default=None, dest=f.name, help=f"{text} (default {default!r})")
         names = [flag(f.name)] + (["--n-blocks"] if f.name == "n_blocks" else [])
         if f.type is bool:
             kw["action"] = argparse.BooleanOptionalAction

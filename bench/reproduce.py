@@ -5,8 +5,8 @@
 
 Runs the method ("ours"), the direct-PPO baseline and the ablations of Table 3 (end2new, init2new,
 w/o restriction; for --ablation-rounds, default 1: the paper's Table 3 is after round 1) with the
-default settings, once with the plain features that self-attention
-learns from (the default) and once with the hand-computed relations (--features relations).
+default settings, once with the plain features that self-attention learns from (the default) and
+once with the hand-computed relations (--features relations).
 Each run is one `taskexp.py` process through bench/run_seeds.py: finished runs are reused and
 stopped ones resumed, so a stopped report goes on where it was. Runs of the default features go
 to runs/<variant>-seed<k> (where the notebooks look), the others to runs/<features>/...
