@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 import report
 import taskexp
-from agent import Agent
+from agent import FEATURES, NETWORKS, Agent
 from taskexp import SHAPES, Config, RunState
 
 # --------------------------------------------------------------------------------------------
@@ -34,8 +34,7 @@ from taskexp import SHAPES, Config, RunState
 
 CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",),
            "shapes": tuple(SHAPES), "dtype": ("float32", "float64"),
-           "network": ("setnet", "attention"), "features": ("plain", "relations"),
-           "action": ("drop", "place")}
+           "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place")}
 MIN_ZERO = {"seed", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add"}
 AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
 SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes")

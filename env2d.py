@@ -419,10 +419,12 @@ class BlockWorld(gymnasium.Env):
         b, ix, iy = self._check_action(action)
         others = state[np.arange(self.n_blocks) != b, :3]
         x = self.x_bins[ix]
-        y = drop_height(x, others) if self.drop else self.y_bins[iy]
-        pose = (x, y + DROP_GAP)
-        if (overlap_depth(pose, others) > OVERLAP_TOL).any():
-            return state, True, None, 0
+        if self.drop:              # let go above all it would hit falling: it overlaps nothing
+            pose = (x, drop_height(x, others) + DROP_GAP)
+        else:
+            pose = (x, self.y_bins[iy] + DROP_GAP)
+            if (overlap_depth(pose, others) > OVERLAP_TOL).any():
+                return state, True, None, 0
         start = state.copy()
         start[b] = (*pose, 0.0, 0.0, 0.0, 0.0)
         self._load(start)

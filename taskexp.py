@@ -448,6 +448,11 @@ def make_agent(cfg, mlp_backward=agent_lib.mlp_backward):
                  network=cfg.network, features=cfg.features)
 
 
+def drops(agent):
+    """True when `agent` was made for the world that drops (make_agent gives it one y choice)."""
+    return agent.n_y == 1
+
+
 def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=silent, log=print,
           workers=1):
     """Base skills (round 0), then cfg.rounds rounds of task expansion and self-distillation, each

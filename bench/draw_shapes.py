@@ -24,8 +24,8 @@ def main():
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
     agent = Agent.load(a.agent) if a.agent else None
-    # an agent with a one-choice y head was trained in the world that drops (taskexp.make_agent)
-    env, rng = BlockWorld(6, drop=bool(agent and agent.n_y == 1)), np.random.default_rng(a.seed)
+    env = BlockWorld(6, drop=agent is not None and taskexp.drops(agent))
+    rng = np.random.default_rng(a.seed)
     names = list(taskexp.SHAPES)
     fig = Figure(figsize=(4.2 * len(names), 4.6))
     for col, name in enumerate(names):

@@ -39,10 +39,10 @@ def main():
     p.add_argument("--seed", type=int, default=5)
     a = p.parse_args()
     agent = Agent.load(a.checkpoint)
+    drop = taskexp.drops(agent)
     cfg = taskexp.Config(features=agent.feature_set, network=agent.network,
-                         action="drop" if agent.n_y == 1 else "place")
+                         action="drop" if drop else "place")
     rng = np.random.default_rng(a.seed)
-    drop = cfg.action == "drop"
     envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, drop=drop)
     short = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, drop=drop)
     tasks, _, _ = taskexp.base_demos(cfg, envs[0], rng, a.tasks)
