@@ -13,7 +13,8 @@ lands on a catch floor half a metre below and stays in the state (its y is negat
 a set of goals {block: (x, y)}; it is solved when every goal block rests within THRESHOLD of its
 target. The state is the array (n_blocks, 6) of x, y, angle, vx, vy, w, and the physics is reset
 to it at every step (as good as a new pymunk Space, see BlockWorld._load), so a step depends on
-(state, action) alone, bit for bit: a saved state replays exactly.
+(state, action) alone, bit for bit: a saved state replays exactly. The world's geometry is in
+taskexp_lib/geometry.py, its pictures in taskexp_lib/draw.py.
 """
 import math
 
@@ -24,18 +25,23 @@ import pymunk.batch
 from gymnasium import spaces
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.patches import Rectangle
 
-# The world's geometry: the one place it is written. The agent's features (agent.featurize), its
-# checkpoints (Agent.save records GEOMETRY, Agent.load checks it) and the exercises read it here.
-BLOCK_W, BLOCK_H = 0.10, 0.05               # metres; width twice the height
-TABLE_X = (-0.5, 0.5)                       # ten block widths
-THRESHOLD = 0.02                            # a goal holds within 2 cm (euclidean, block centre)
-N_X = 37
-# spacing BLOCK_W / 4; a block on any bin lies on the table
-X_BINS = np.linspace(-0.45, 0.45, N_X)
-GEOMETRY = {"block_w": BLOCK_W, "block_h": BLOCK_H, "table_lo": TABLE_X[0], "table_hi": TABLE_X[1],
-            "threshold": THRESHOLD, "x_lo": X_BINS[0], "x_hi": X_BINS[-1]}
+from taskexp_lib.draw import draw_scene, rgb_array
+from taskexp_lib.geometry import (
+    BLOCK_H,
+    BLOCK_W,
+    N_X,
+    SAME_SPOT,
+    TABLE_X,
+    THRESHOLD,
+    X_BINS,
+    is_success,
+    layer_y,
+    max_goal_y,
+    nearest_x_bin,
+    observation,
+    same_spot,
+)
 
 # Physics. Measured with pymunk 7.3.1: thin segments let blocks tunnel (hence a thick table box);
 # a 0.5 mm drop gap avoids the spin of a block born touching another; the default slop is far too
@@ -45,24 +51,14 @@ GRAVITY = -9.81
 MASS = 0.1
 FRICTION = 0.8
 SLOP = 0.001                                # allowed penetration (m); resting blocks sink this much
-# BIAS: fraction of an overlap left after one second; 0.9 ** 60 is chipmunk's default (a tenth of it
-# corrected per substep). A stiffer 0.5 ** 60 settled most drops in fewer substeps, but it pumped
-# energy into tall stacks near the table's edge, which then rocked for 20 s or more. On
-# bench_settle.py's 88,000 actions, 0.8 ** 60 took 23% fewer substeps but one action hit the cap;
-# 0.85 ** 60 took 13% fewer, but the slowest took 750 substeps (515 now) and 4% of the outcomes
-# changed (a block ending over 1 cm or 0.1 rad elsewhere; moving DROP_GAP by 0.1 mm changes 1.4%).
+# BIAS: fraction of an overlap left after one second; chipmunk's default (a tenth of it
+# corrected per substep): stiffer values rock tall stacks (README, design notes).
 BIAS = 0.9 ** 60
 DROP_GAP = 0.0005                           # teleport this far above the layer centre
-# Most substeps of a drop are spent after the impact: in the substep of contact a falling block
-# sinks into its support by up to its travel in one substep (3 cm at 1.8 m/s), and the overlap
-# correction then lifts it out for ~35 substeps. Falling in closed form down to the contact took a
-# third fewer substeps, but it changed 14% of the outcomes, so the fall is simulated.
 FLOOR_Y = -0.5                              # the catch floor under the table
 # Rest: REST_SUBSTEPS consecutive substeps with |v| < REST_V, |w| < REST_W and no point of any
 # block further than REST_MOVE from where it was when the quiet run began; at most MAX_SUBSTEPS
-# (see _settle). The cap is 20 s. Over 88,000 random and adversarial actions (python
-# bench/bench_settle.py) the slowest came to rest after 515 substeps (8.6 s; 99.9% within 140):
-# tall towers rocking at the edge.
+# (20 s; see _settle, and bench/bench_settle.py for how far below it actions stay).
 REST_V, REST_W, REST_MOVE, REST_SUBSTEPS, MAX_SUBSTEPS = 0.01, 0.05, 0.0005, 10, 1200
 CHECK_EVERY = 5                             # read the bodies every 5th substep
 # a rotation dtheta moves a corner by <= HALF_DIAG * dtheta
@@ -84,61 +80,6 @@ _set_shape_id_counter, _set_current_time_step = (_lib.cpSpaceSetShapeIDCounter,
                                                  _lib.cpSpaceSetCurrentTimeStep)
 _each_body = _lib.cpSpaceEachBody
 _get_body_rows = _ffi.addressof(_lib, "pmSpaceBodyGetIteratorFuncBatched")   # pymunk's batch read
-COLOURS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
-           "tab:olive"]
-
-
-def layer(y):
-    """Layer index of a height y (layer 0 rests on the table): an int, or an int array."""
-    k = np.round(np.asarray(y) / BLOCK_H - 0.5).astype(np.int64)
-    return int(k) if k.ndim == 0 else k
-
-
-def layer_y(k):
-    """Height of the centre of a block resting flat in layer k (an int or an array)."""
-    return (np.asarray(k) + 0.5) * BLOCK_H
-
-
-def max_goal_y(n_blocks):
-    """The highest a block's centre can be: all n blocks stacked on end, one on the other. A goal
-    above it can never be met."""
-    return n_blocks * BLOCK_W - BLOCK_W / 2
-
-
-# Two blocks' centres are at least BLOCK_H apart (each holds a disc of radius BLOCK_H / 2), so two
-# goals closer than this can never both hold within THRESHOLD: they name the same spot.
-SAME_SPOT = BLOCK_H - 2 * THRESHOLD
-
-
-def on_same_spot(p, q):
-    """True when goal positions p and q, (x, y) each, are less than SAME_SPOT apart."""
-    return bool(np.hypot(p[0] - q[0], p[1] - q[1]) < SAME_SPOT)
-
-
-def same_spot(goals):
-    """The first pair of blocks (a, b) whose goals {block: (x, y)} name the same spot, or None."""
-    items = list(goals.items())
-    for i, (a, p) in enumerate(items):
-        for b, q in items[i + 1:]:
-            if on_same_spot(p, q):
-                return a, b
-    return None
-
-
-def observation(state, goals):
-    """Observation (n, 6) float32 of a state (n, 6) and goals {block: (x, y)}:
-    columns x, y, angle, goal_x, goal_y, has_goal (goal columns 0 for blocks without a goal)."""
-    obs = np.zeros((len(state), 6), np.float32)
-    obs[:, :3] = state[:, :3]
-    for b, (x, y) in goals.items():
-        obs[b, 3:] = (x, y, 1.0)
-    return obs
-
-
-def is_success(state, goals, threshold=THRESHOLD):
-    """True iff every goal block's centre is within `threshold` of its target (state (n, 6))."""
-    return all(np.hypot(state[b, 0] - x, state[b, 1] - y) < threshold
-               for b, (x, y) in goals.items())
 
 
 def overlap_depth(pose, others):
@@ -174,56 +115,6 @@ def drop_height(x, others):
     return top + BLOCK_H / 2
 
 
-def draw_scene(ax, state, goals=None, title=None):
-    """Draw a state (n, 6) on a matplotlib Axes: the table, blocks with their ids, goals as dashed
-    outlines in their block's colour. Fixed limits, so frames of an episode line up. Returns ax."""
-    n = len(state)
-    ax.add_patch(Rectangle((TABLE_X[0], -0.05), TABLE_X[1] - TABLE_X[0], 0.05, color="0.55"))
-    for b, (x, y) in (goals or {}).items():
-        ax.add_patch(Rectangle((x - BLOCK_W / 2, y - BLOCK_H / 2), BLOCK_W, BLOCK_H, fill=False,
-                               ls="--", lw=1.5, ec=COLOURS[b % len(COLOURS)]))
-    for b, (x, y, angle) in enumerate(state[:, :3]):
-        ax.add_patch(Rectangle((x - BLOCK_W / 2, y - BLOCK_H / 2), BLOCK_W, BLOCK_H, alpha=0.85,
-                               angle=np.degrees(angle), rotation_point="center",
-                               fc=COLOURS[b % len(COLOURS)], ec="k", lw=0.8))
-        ax.text(x, y, str(b), ha="center", va="center", fontsize=8, color="w")
-    ax.set_xlim(TABLE_X[0] - 0.05, TABLE_X[1] + 0.05)
-    ax.set_ylim(-0.05, n * BLOCK_H + 0.1)
-    ax.set_aspect("equal")
-    if title:
-        ax.set_title(title)
-    return ax
-
-
-def animate(states, goals=None, titles=None, fps=2, dpi=60, html=False):
-    """An episode as an animated GIF: one draw_scene frame per state (T, n, 6), the last held 3x.
-
-    goals: one {block: (x, y)} for all frames, or a list with one per frame (None: no goals);
-    titles: one per frame (default "step t"). Returns the GIF's bytes, or with html=True an
-    <img> tag holding them: a self-contained HTML output for a notebook.
-    """
-    import base64
-    import io
-
-    from PIL import Image
-    states = np.asarray(states)
-    per_frame = goals if isinstance(goals, (list, tuple)) else [goals] * len(states)
-    titles = titles or [f"step {t}" for t in range(len(states))]
-    fig = Figure(figsize=(5.0, 2.6), dpi=dpi)
-    canvas, frames = FigureCanvasAgg(fig), []
-    for state, g, title in zip(states, per_frame, titles):
-        fig.clear()
-        draw_scene(fig.add_subplot(), state, g, title=title).axis("off")
-        fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.9)
-        canvas.draw()
-        rgb = np.asarray(canvas.buffer_rgba())[..., :3].copy()
-        frames.append(Image.fromarray(rgb).quantize(64))
-    buf, ms = io.BytesIO(), int(1000 / fps)
-    frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], loop=0,
-                   duration=[ms] * (len(frames) - 1) + [3 * ms])
-    gif = buf.getvalue()
-    return f'<img src="data:image/gif;base64,{base64.b64encode(gif).decode()}">' if html else gif
-
 
 class BlockWorld(gymnasium.Env):
     """The block world as a Gymnasium environment (see the module docstring).
@@ -249,7 +140,7 @@ class BlockWorld(gymnasium.Env):
             raise ValueError(f"drop={drop!r}: need True (drop at an x) or False (place in a layer)")
         self.n_blocks, self.max_steps, self.render_mode = int(n_blocks), int(max_steps), render_mode
         self.drop = drop
-        self.block_size, self.table_x, self.threshold = (BLOCK_W, BLOCK_H), TABLE_X, THRESHOLD
+        self.table_x, self.threshold = TABLE_X, THRESHOLD
         self.x_bins = X_BINS.copy()
         self.y_bins = layer_y(np.arange(self.n_blocks))          # the layers: where goals lie
         self.action_space = spaces.MultiDiscrete([self.n_blocks, N_X, 1 if drop else self.n_blocks])
@@ -316,8 +207,8 @@ class BlockWorld(gymnasium.Env):
             raise ValueError(f"block {block!r} not in 0..{self.n_blocks - 1}")
         if not (np.isfinite(x) and np.isfinite(y)):
             raise ValueError(f"position ({x!r}, {y!r}) not finite")
-        ix, iy = np.abs(self.x_bins - x).argmin(), np.abs(self.y_bins - y).argmin()
-        return np.array([block, ix, 0 if self.drop else iy], np.int64)
+        iy = np.abs(self.y_bins - y).argmin()
+        return np.array([block, nearest_x_bin(x), 0 if self.drop else iy], np.int64)
 
     def decode_action(self, action):
         """(block, x, y) of an action (3,): the block id and the centre it is teleported to;
@@ -453,8 +344,7 @@ class BlockWorld(gymnasium.Env):
         fig = Figure(figsize=(6.4, 3.2), dpi=100)
         canvas = FigureCanvasAgg(fig)
         draw_scene(fig.add_subplot(), self._state, self._goals, title=f"step {self._steps}")
-        canvas.draw()
-        return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+        return rgb_array(canvas)
 
     # -- scattering and goals -------------------------------------------------------------------
 
@@ -582,36 +472,6 @@ def _free_segments(goal_xs):
     if lo < TABLE_X[1]:
         segments.append((lo, TABLE_X[1]))
     return segments
-
-
-# --------------------------------------------------------------------------------------------
-# Stress actions: shared by the property test (tests/test_env2d.py, drawing through hypothesis)
-# and bench/bench_settle.py (drawing from a numpy Generator), so both drive the same distribution
-# --------------------------------------------------------------------------------------------
-
-def stack_tower(env):
-    """Stack every block on block 0, one layer each: a tower as tall as the world allows."""
-    for k, b in enumerate(range(1, env.n_blocks)):
-        env.step([b, int(np.abs(X_BINS - env.get_state()[0, 0]).argmin()), k + 1])
-
-
-def adversarial_action(state, integers, choice):
-    """An action (block, x-bin, layer) aimed where physics is most likely to break, given the
-    current state (n, 6). integers(lo, hi) draws an int in [lo, hi]; choice(seq) draws an element
-    of seq."""
-    n = len(state)
-    b = integers(0, n - 1)
-    kind = choice(["uniform", "into", "onto", "air", "edge"])
-    if kind == "uniform":
-        return b, integers(0, N_X - 1), integers(0, n - 1)
-    if kind == "edge":                                     # half over the table's edge, any height
-        return b, choice([0, 1, N_X - 2, N_X - 1]), integers(0, n - 1)
-    if kind == "air":                                      # the top layer: a long fall
-        return b, integers(0, N_X - 1), n - 1
-    j = integers(0, n - 1)                                 # another block, maybe on a tall stack
-    ix = int(np.abs(X_BINS - state[j, 0]).argmin()) + integers(-3, 3)
-    k = int(np.clip(np.floor(state[j, 1] / BLOCK_H), 0, n - 1)) + (kind == "onto")
-    return b, int(np.clip(ix, 0, N_X - 1)), int(np.clip(k, 0, n - 1))
 
 
 # `gymnasium.make("taskexp/BlockWorld-v0", n_blocks=7)` builds a BlockWorld (keywords pass through).

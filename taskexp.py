@@ -12,10 +12,15 @@
            train           the loop that calls them in order: read it last
 
 A task is a pair (s0, goals): a state array (n_blocks, 6) and a dict {block: (x, y)}.
-The hyperparameters are in config.py, the batched episodes in rollout.py. Plumbing lives in
-cli.py (arguments, run directory, checkpoints, resume, progress) and report.py (statistics,
-tables, figures). `python taskexp.py --rounds 3` runs cli.main().
+The hyperparameters are in taskexp_lib/config.py, the batched episodes in taskexp_lib/rollout.py;
+the plumbing (arguments, run directory, checkpoints, resume, progress, tables and figures) in
+taskexp_lib/cli.py. `python taskexp.py --rounds 3` runs cli.main().
 """
+# `python taskexp.py` hands over to the CLI, which imports this file as taskexp: so the method is
+# defined once, rather than once more as __main__.
+if __name__ == "__main__":
+    from taskexp_lib.cli import main
+    raise SystemExit(main())
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from functools import partial
@@ -26,10 +31,11 @@ from tqdm import tqdm
 
 import agent as agent_lib
 from agent import Agent
-from config import Config  # noqa: F401  (re-exported: taskexp.Config, the settings of a run)
-from env2d import BLOCK_W, N_X, is_success, layer, observation, on_same_spot
-from report import task_stats
-from rollout import Trajectory, Worlds, physics_pool, run_episodes, success_rate
+from taskexp_lib import one_blas_thread
+from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Config, a run's settings)
+from taskexp_lib.geometry import BLOCK_W, N_X, is_success, layer, observation, on_same_spot
+from taskexp_lib.report import task_stats
+from taskexp_lib.rollout import Trajectory, Worlds, physics_pool, run_episodes, success_rate
 
 
 @contextmanager
@@ -41,7 +47,7 @@ def phase(where):
         raise FloatingPointError(f"{where}: {e}") from None
 
 
-silent = partial(tqdm, disable=True)     # the default progress bar: none (cli.py draws one)
+silent = partial(tqdm, disable=True)     # the default progress bar: none (the CLI draws one)
 
 
 def on_table(state, env):
@@ -234,12 +240,12 @@ def select_goal(agent, s0, sT, candidates, mode="ours"):
     ours:     argmax_g V(sT, g) - V(s0, g)   hard from the start, easy from where we ended
     end2new:  argmax_g V(sT, g)              easy from where we ended (Table 3)
     init2new: argmin_g V(s0, g)              hard from the start (Table 3)
-    Returns (index of g*, scores (K,)).
+    Returns the index of g* in candidates.
     """
     v_T = agent.value(np.stack([observation(sT, g) for g in candidates]))
     v_0 = agent.value(np.stack([observation(s0, g) for g in candidates]))
     scores = {"ours": v_T - v_0, "end2new": v_T, "init2new": -v_0}[mode]
-    return int(np.argmax(scores)), scores
+    return int(np.argmax(scores))
 
 
 def join(first, second, goals, success):
@@ -284,7 +290,7 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
                  for _ in range(cfg.candidates)]
         # a candidate that already holds at sT is no new task (equation 1 would favour it)
         cands = [g for g in cands if not is_success(traj.states[-1], g, env.threshold)] or cands
-        i, _ = pieces.select_goal(agent, traj.states[0], traj.states[-1], cands, cfg.select)
+        i = pieces.select_goal(agent, traj.states[0], traj.states[-1], cands, cfg.select)
         chosen.append(cands[i])
     onward = [(traj.states[-1], goals) for traj, goals in zip(found, chosen)]
     with bar(total=len(onward), desc="verify") as progress:
@@ -310,7 +316,7 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
 
 @dataclass
 class RunState:
-    """What a run carries from one round to the next (cli.py saves it as state.npz)."""
+    """What a run carries from one round to the next (checkpoint.py saves it as state.npz)."""
     last_round: int = -1                # the last complete round; -1 before the base skills
     buffer_obs: np.ndarray = None       # demo steps (N, n, 6) for BC, the newest buffer_size
     buffer_act: np.ndarray = None       # their actions (N, 3)
@@ -459,7 +465,7 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
     evaluated zero-shot. Returns the RunState; its results hold one record per round.
 
     To go on with a stopped run, pass its agent, RunState and Generator. on_round(k, agent, run,
-    rng), if given, is called after every round (cli.py saves checkpoints there). workers > 1
+    rng), if given, is called after every round (the CLI saves checkpoints there). workers > 1
     runs the physics in that many processes; the results are the same for any number.
     """
     pieces = pieces or Pieces()
@@ -467,7 +473,7 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
     agent = agent or make_agent(cfg, pieces.mlp_backward)
     run = run or RunState(results=dict(config=asdict(cfg), rounds=[], wallclock={}))
     drop = cfg.action == "drop"
-    with physics_pool(workers, cfg.n_blocks, drop) as pool:
+    with one_blas_thread(), physics_pool(workers, cfg.n_blocks, drop) as pool:
         envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool, drop)
         short_envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool, drop)
         evals = eval_tasks(cfg, envs[0])
@@ -489,8 +495,3 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
             if on_round:
                 on_round(k, agent, run, rng)
     return run
-
-
-if __name__ == "__main__":
-    import cli
-    cli.main()

@@ -4,10 +4,10 @@ actions, to show that env2d.MAX_SUBSTEPS is not cut short.
     python bench/bench_settle.py [--episodes 6000] [--seed 7]
 
 Episodes as in the property test tests/test_env2d.py::test_physics_never_breaks, with the same
-env2d.stack_tower and env2d.adversarial_action: 2 to 8 blocks, half of them starting from a tower as
-tall as it gets, then 1 to 40 actions, each aimed uniformly, at the table's edge, far in the
-air, into another block or onto it. Prints the mean, percentiles and the maximum of the substeps to
-rest (60 a second) and how many actions hit the cap. About 25 s per 6000 episodes.
+stack_tower and adversarial_action (taskexp_lib/stress.py): 2 to 8 blocks, half of them starting
+from a tower as tall as it gets, then 1 to 40 actions, each aimed uniformly, at the table's edge,
+far in the air, into another block or onto it. Prints the mean, percentiles and the maximum of
+the substeps to rest (60 a second) and how many actions hit the cap. About 25 s per 6000 episodes.
 """
 
 
@@ -16,7 +16,8 @@ import argparse
 import numpy as np
 
 import env2d
-from env2d import BlockWorld, adversarial_action, stack_tower
+from env2d import BlockWorld
+from taskexp_lib.stress import adversarial_action, stack_tower
 
 
 def main():

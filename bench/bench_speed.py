@@ -24,10 +24,10 @@ from dataclasses import replace
 import numpy as np
 
 import agent
-import cli
 import env2d
 import taskexp
-from config import Config
+from taskexp_lib import cli, nn
+from taskexp_lib.config import Config
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
@@ -61,7 +61,7 @@ class Timer:
 
 def shares(cfg, out):
     timers = {"physics": [Timer(env2d.BlockWorld, "simulate")],
-              "network": [Timer(agent.MLP, "forward"), Timer(agent.MLP, "backward")]}
+              "network": [Timer(nn.MLP, "forward"), Timer(nn.MLP, "backward")]}
     try:
         total, _ = timed_run(cfg, 1, out)
     finally:
@@ -92,7 +92,9 @@ def network_ratios(cfg):
     rng = np.random.default_rng(0)
     env = env2d.BlockWorld(cfg.n_blocks)
     tasks, obs, actions = taskexp.base_demos(cfg, env, rng, 4096)
-    ag = agent.Agent(cfg.n_blocks, hidden=cfg.hidden, dtype=cfg.dtype)
+    # the deep set over the relations, in the world that places: the network this bench measures
+    ag = agent.Agent(cfg.n_blocks, n_y=cfg.n_blocks, hidden=cfg.hidden, dtype=cfg.dtype,
+                     network="setnet", features="relations")
     t0 = time.perf_counter()
     ag.bc(obs, actions, 1, cfg.bc_batch, cfg.bc_lr, rng)
     bc = time.perf_counter() - t0

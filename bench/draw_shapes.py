@@ -14,7 +14,9 @@ from matplotlib.figure import Figure
 
 import taskexp
 from agent import Agent
-from env2d import BlockWorld, draw_scene, is_success
+from env2d import BlockWorld
+from taskexp_lib.draw import draw_scene
+from taskexp_lib.geometry import is_success
 
 
 def main():

@@ -19,9 +19,10 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import taskexp  # noqa: E402
-from agent import Agent, relations  # noqa: E402
-from env2d import THRESHOLD, is_success, observation  # noqa: E402
-from rollout import Worlds, run_episodes  # noqa: E402
+from agent import Agent  # noqa: E402
+from taskexp_lib.features import relations  # noqa: E402
+from taskexp_lib.geometry import THRESHOLD, is_success, observation  # noqa: E402
+from taskexp_lib.rollout import Worlds, run_episodes  # noqa: E402
 
 
 def feasible(state, goals):

@@ -27,7 +27,7 @@ from matplotlib.figure import Figure
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from run_seeds import pm, run_one  # noqa: E402
 
-from config import Config  # noqa: E402
+from taskexp_lib.config import Config  # noqa: E402
 
 # The paper's numbers (shared/paper/README.md): Table 1 by round 1-3, Table 2 by round 1-3,
 # Table 3 after round 1; direct PPO: 0% on every shape (sec 5.3).

@@ -17,7 +17,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-import cli
+from taskexp_lib import cli
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"]}
@@ -31,7 +31,8 @@ def run_one(variant, seed, rounds, root, extra_args):
     out = os.path.join(root, f"{DIRS.get(variant, variant)}-seed{seed}")
     done = cli.saved_round(out)
     if done < rounds:
-        cmd = [sys.executable, "-m", "cli", "--rounds", str(rounds), "--out", out, "--workers", "1"]
+        cmd = [sys.executable, "-m", "taskexp_lib.cli", "--rounds", str(rounds), "--out", out,
+               "--workers", "1"]
         cmd += ["--resume"] if done >= 0 else ["--seed", str(seed), *FLAGS[variant], *extra_args]
         with open(out + ".log", "a" if done >= 0 else "w") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)

@@ -4,9 +4,10 @@ equivariance, attention rows summing to 1, float32, and use as a drop-in for age
 import numpy as np
 import pytest
 
-import agent as attention
-from agent import AttentionNet, LayerNorm, SelfAttention, softmax
-from exercises.checks import numerical_grad  # central differences, step 1e-6
+from taskexp_lib import nn
+from taskexp_lib.exercises.checks import numerical_grad  # central differences, step 1e-6
+from taskexp_lib.nets import AttentionNet
+from taskexp_lib.nn import LayerNorm, SelfAttention, softmax
 
 TOL = 1e-6
 
@@ -85,12 +86,12 @@ class ElementwiseSoftmax(SelfAttention):
     """softmax'(s) = p (1 - p) elementwise: only the diagonal of the Jacobian."""
 
     def backward(self, dout):
-        right = attention.softmax_backward
-        attention.softmax_backward = lambda p, dp: p * (1 - p) * dp
+        right = nn.softmax_backward
+        nn.softmax_backward = lambda p, dp: p * (1 - p) * dp
         try:
             return super().backward(dout)
         finally:
-            attention.softmax_backward = right
+            nn.softmax_backward = right
 
 
 class UnscaledBackward(SelfAttention):
@@ -123,7 +124,7 @@ def test_softmax_backward_is_full_jacobian():
     s, dp = rng.standard_normal(5), rng.standard_normal(5)
     p = softmax(s)
     J = np.diag(p) - np.outer(p, p)                # dp_i/ds_j
-    assert np.allclose(attention.softmax_backward(p, dp), J.T @ dp)
+    assert np.allclose(nn.softmax_backward(p, dp), J.T @ dp)
 
 
 # ----------------------------------------------------------------------------- behaviour

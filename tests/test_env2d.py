@@ -9,7 +9,10 @@ from gymnasium.utils.env_checker import check_env
 from matplotlib.figure import Figure
 
 import env2d
-from env2d import BLOCK_H, BLOCK_W, THRESHOLD, BlockWorld, draw_scene, is_success, observation
+from env2d import BlockWorld
+from taskexp_lib import stress
+from taskexp_lib.draw import draw_scene
+from taskexp_lib.geometry import BLOCK_H, BLOCK_W, THRESHOLD, is_success, observation
 
 
 @pytest.fixture
@@ -318,9 +321,9 @@ def lowest_point(state):
 
 @st.composite
 def adversarial_action(draw, state):
-    """env2d.adversarial_action, drawn through hypothesis so a failing example shrinks."""
-    return env2d.adversarial_action(state, lambda lo, hi: draw(st.integers(lo, hi)),
-                                    lambda seq: draw(st.sampled_from(seq)))
+    """stress.adversarial_action, drawn through hypothesis so a failing example shrinks."""
+    return stress.adversarial_action(state, lambda lo, hi: draw(st.integers(lo, hi)),
+                                     lambda seq: draw(st.sampled_from(seq)))
 
 
 # Its long lines stay (noqa): derandomize=True seeds hypothesis from the test's source, comments
@@ -335,7 +338,7 @@ def test_physics_never_breaks(data, n, seed, tower):
     env = BlockWorld(n, max_steps=10**6)
     env.reset(seed=seed)
     if tower:                                              # start from a tower as tall as it gets
-        env2d.stack_tower(env)
+        stress.stack_tower(env)
     saved, actions, states = env.get_state(), [], []
     for _ in range(data.draw(st.integers(1, 40), label="steps")):
         action = data.draw(adversarial_action(env.get_state()), label="action")

@@ -1,4 +1,4 @@
-"""Tests of the problem set (the exercises package, notebooks/exercises/): the checks must be able
+"""Tests of the problem set (taskexp_lib.exercises, notebooks/exercises/): the checks must be able
 to fail.
 
 Every reference solution passes its check (the library's and the instructor notebooks'); every
@@ -21,13 +21,13 @@ import numpy as np
 import pytest
 
 import agent
-import exercises
-import exercises.kit
 import taskexp
-from env2d import is_success
+import taskexp_lib.exercises as exercises
+from taskexp_lib import nn
+from taskexp_lib.geometry import is_success
 
 R = exercises.REFERENCE
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(exercises.__file__)))   # the repository
+ROOT = exercises.kit.ROOT                                                   # the repository
 SIMPLE = ["ex1", "ex2", "ex3", "ex4", "ex5", "ex6", "ex8"]   # all but the behavioural ex7
 
 
@@ -301,12 +301,12 @@ def test_ex7_trains_with_the_students_functions(piece, monkeypatch):
     touched."""
     def boom(*args, **kwargs):
         raise RuntimeError(f"the student's {piece} was called")
-    library = agent.mlp_backward, agent.gae, agent.ppo_loss, agent.ActionDist, taskexp.Pieces()
+    library = nn.mlp_backward, agent.gae, agent.ppo_loss, agent.ActionDist, taskexp.Pieces()
     monkeypatch.setitem(exercises.EX7, "demos", 50)
     monkeypatch.setitem(exercises.EX7, "ppo_steps", 200)
     with pytest.raises(RuntimeError, match=f"student's {piece} was called"):
         exercises.base_policy_success(**{piece: boom})
-    assert (agent.mlp_backward, agent.gae, agent.ppo_loss, agent.ActionDist,
+    assert (nn.mlp_backward, agent.gae, agent.ppo_loss, agent.ActionDist,
             taskexp.Pieces()) == library
 
 
@@ -425,7 +425,7 @@ def test_blank_keeps_the_indentation():
 
 def cli(*args, cwd=ROOT):
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return subprocess.run([sys.executable, "-m", "exercises", *args], cwd=cwd, env=env,
+    return subprocess.run([sys.executable, "-m", "taskexp_lib.exercises", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=300)
 
 

@@ -11,6 +11,7 @@ import site
 import subprocess
 import sys
 import textwrap
+import zipfile
 
 import pytest
 
@@ -55,7 +56,10 @@ def test_installed_world_registers_with_gymnasium_and_passes_check_env(fresh, tm
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             check_env(gymnasium.make("taskexp/BlockWorld-v0").unwrapped)
-        import taskexp, cli, exercises                                  # every module imports
+        import importlib, pkgutil, taskexp, agent, taskexp_lib            # every module imports
+        for m in pkgutil.walk_packages(taskexp_lib.__path__, "taskexp_lib."):
+            if m.name != "taskexp_lib.exercises.__main__":              # that one runs the CLI
+                importlib.import_module(m.name)
         print("ok")
     """ % ROOT)
     res = subprocess.run([python, "-c", code], cwd=tmp_path, capture_output=True, text=True)
@@ -68,3 +72,15 @@ def test_installed_console_script_prints_its_help(fresh, tmp_path):
                          text=True)
     assert res.returncode == 0, res.stderr
     assert "--rounds" in res.stdout and "--ppo-steps" in res.stdout
+
+
+def test_the_wheel_installs_only_the_three_modules_and_the_project_package(tmp_path):
+    """No generic top-level name (config, cli, exercises ...) that another package could shadow."""
+    res = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w",
+                          str(tmp_path), ROOT], capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout + res.stderr
+    (wheel,) = tmp_path.glob("taskexp-*.whl")
+    with zipfile.ZipFile(wheel) as z:
+        top = {name.split("/")[0].removesuffix(".py") for name in z.namelist()
+               if ".dist-info/" not in name}
+    assert top == {"taskexp", "env2d", "agent", "taskexp_lib"}

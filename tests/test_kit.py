@@ -1,4 +1,5 @@
-"""The student kit (`python -m exercises release OUT`): self-contained, and without answers.
+"""The student kit (`python -m taskexp_lib.exercises release OUT`): self-contained, and without
+answers.
 
 Its library is the repository's with each exercised function's body replaced by a raise, and
 nothing else changed; no line of a reference solution (the library's exercised functions, the
@@ -19,9 +20,9 @@ import sys
 import numpy as np
 import pytest
 
-import exercises
-import exercises.kit as kit
-from exercises import vectors
+import taskexp_lib.exercises as exercises
+import taskexp_lib.exercises.kit as kit
+from taskexp_lib.exercises import vectors
 
 ROOT = kit.ROOT
 
@@ -33,7 +34,7 @@ def kit_dir(tmp_path_factory):
 
 def cli(*args, cwd=ROOT, python=sys.executable):
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return subprocess.run([python, "-m", "exercises", *args], cwd=cwd, env=env,
+    return subprocess.run([python, "-m", "taskexp_lib.exercises", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=600)
 
 
@@ -41,10 +42,11 @@ def test_cli_release_writes_the_kit_and_never_over_the_repository(tmp_path):
     out = tmp_path / "kit"
     res = cli("release", str(out))
     assert res.returncode == 0, res.stdout + res.stderr
+    top_level = [f"{m}.py" for m in kit.LIBRARY if "." not in m]      # and taskexp_lib/
     assert sorted(os.listdir(out)) == sorted(
-        [*exercises.NOTEBOOKS.values(), *(f"{m}.py" for m in kit.LIBRARY), "exercises",
-         "requirements.txt", "README.md"])
-    assert "vectors.json" in os.listdir(out / "exercises")
+        [*exercises.NOTEBOOKS.values(), *top_level, "taskexp_lib", "requirements.txt",
+         "README.md"])
+    assert "vectors.json" in os.listdir(out / "taskexp_lib" / "exercises")
     assert cli("release", str(out)).returncode == 0                   # an earlier kit: updated
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("mine")
@@ -54,9 +56,14 @@ def test_cli_release_writes_the_kit_and_never_over_the_repository(tmp_path):
 
 
 def test_library_list_is_pyproject_s():
+    """The kit's library is what the wheel installs: pyproject's top-level modules, and every
+    module of the taskexp_lib package (the exercises are copied apart, with their vectors)."""
     with open(os.path.join(ROOT, "pyproject.toml")) as f:
         listed = re.search(r"py-modules = \[(.*?)\]", f.read()).group(1)
-    assert sorted(re.findall(r'"(\w+)"', listed)) == sorted(kit.LIBRARY)
+    assert sorted(re.findall(r'"(\w+)"', listed)) == sorted(m for m in kit.LIBRARY if "." not in m)
+    package = sorted(f"taskexp_lib.{name[:-3]}" for name in os.listdir(kit.PACKAGE)
+                     if name.endswith(".py"))
+    assert package == sorted(m for m in kit.LIBRARY if "." in m)
 
 
 def functions_of(tree):
@@ -74,9 +81,9 @@ def functions_of(tree):
 def test_kit_library_stubs_exactly_the_exercised_functions(kit_dir):
     exercised = {(m, q) for names in kit.EXERCISED.values() for m, q in names}
     for module in kit.LIBRARY:
-        with open(os.path.join(ROOT, f"{module}.py")) as f:
+        with open(kit.source_file(module)) as f:
             ref = ast.parse(f.read())
-        with open(os.path.join(kit_dir, f"{module}.py")) as f:
+        with open(kit.source_file(module, kit_dir)) as f:
             mine = ast.parse(f.read())
         ref_fns, kit_fns = functions_of(ref), functions_of(mine)
         assert sorted(ref_fns) == sorted(kit_fns), module
@@ -113,13 +120,13 @@ def test_the_answer_search_finds_an_answer(kit_dir, tmp_path):
     with open(os.path.join(ROOT, "agent.py")) as f:
         gae = f.read()
     first, last = kit.body_lines(gae, "gae")
-    with open(tmp_path / "leaky" / "exercises" / "helpers.py", "w") as f:
+    with open(tmp_path / "leaky" / "taskexp_lib" / "exercises" / "helpers.py", "w") as f:
         f.write("\n".join(gae.splitlines()[first - 1:last]))
     assert [where for _, where, _ in kit.answers_in(tmp_path / "leaky")] == ["agent.gae"]
 
 
 def test_recorded_cases_are_the_live_ones(kit_dir):
-    with open(os.path.join(kit_dir, "exercises", "vectors.json")) as f:
+    with open(os.path.join(kit_dir, "taskexp_lib", "exercises", "vectors.json")) as f:
         recorded = json.load(f)["cases"]
     live = json.loads(json.dumps(kit.record_vectors()))
     assert recorded == live and len(live) == 5 + 6 + 12 + 6 + 7 + 13 + 5
@@ -159,7 +166,7 @@ def bare_python(tmp_path_factory):
 def test_kit_runs_from_a_folder_outside_the_checkout(kit_dir, bare_python, tmp_path):
     kit_copy = shutil.copytree(kit_dir, tmp_path / "anywhere")
     # no module from the checkout (its virtual environment's packages may live inside it)
-    where = ("import sys, exercises, agent, taskexp, env2d; "
+    where = ("import sys, taskexp_lib.exercises, agent, taskexp, env2d; "
              "print(sorted({m.__file__ for m in list(sys.modules.values()) "
              "if getattr(m, '__file__', None) and m.__file__.startswith(%r) "
              "and 'site-packages' not in m.__file__}))" % ROOT)

@@ -1,4 +1,4 @@
-"""The notebooks under notebooks/ run top to bottom in quick mode, and env2d.animate works.
+"""The notebooks under notebooks/ run top to bottom in quick mode, and draw.animate works.
 
 Each notebook is executed in memory with nbclient (kernel "python3", working directory notebooks/,
 TASKEXP_QUICK=1), so nothing is written into the repository: quick mode keeps its runs in
@@ -15,7 +15,8 @@ import pytest
 from nbclient import NotebookClient
 from PIL import Image
 
-from env2d import BlockWorld, animate
+from env2d import BlockWorld
+from taskexp_lib.draw import animate
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 NOTEBOOKS = sorted(glob.glob(os.path.join(ROOT, "notebooks", "*.ipynb")))

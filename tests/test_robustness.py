@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 import agent as agent_module
-import cli
 import taskexp
 from agent import Agent
+from taskexp_lib import checkpoint, cli
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TINY = ["--scale", "0.02"]
@@ -219,37 +219,40 @@ def test_ctrl_c_stops_cleanly_and_says_how_to_resume(tmp_path):
 def test_tasks_survive_the_state_file_with_their_goal_order():
     s0 = np.random.default_rng(0).normal(size=(6, 6))
     tasks = [(s0, {3: (0.1, 0.025), 0: (-0.2, 0.075)}), (s0 + 1, {5: (0.3, 0.025)})]
-    back = cli.arrays_to_tasks(*cli.tasks_to_arrays(tasks, 6))
+    back = checkpoint.arrays_to_tasks(*checkpoint.tasks_to_arrays(tasks, 6))
     assert [list(g.items()) for _, g in back] == [list(g.items()) for _, g in tasks]
     assert all(np.array_equal(a, b) for (a, _), (b, _) in zip(back, tasks))
 
 
 # ----------------------------------------------------------------------------- numerics
 
+DEEP_SET = dict(network="setnet", features="relations")      # whose parameters the test names
+
+
 @pytest.mark.filterwarnings("ignore::RuntimeWarning")     # the overflow is the point of the test
 def test_nan_in_training_stops_with_phase_and_step():
     rng = np.random.default_rng(0)
     obs, acts = rng.normal(size=(40, 6, 6)), np.zeros((40, 3), np.int64)
-    agent = Agent(hidden=8)
+    agent = Agent(hidden=8, n_y=6, **DEEP_SET)
     agent.actor.params["rho.b1"][3] = np.nan
     with pytest.raises(FloatingPointError, match="BC epoch 1 minibatch 1: non-finite loss"):
         agent.bc(obs, acts, 2, 16, 1e-3, rng)
-    agent = Agent(hidden=8)
+    agent = Agent(hidden=8, n_y=6, **DEEP_SET)
     with pytest.raises(FloatingPointError, match="PPO update: inputs: non-finite advantages"):
         agent.ppo_update(obs, acts, np.zeros(40), np.r_[np.inf, np.zeros(39)], np.zeros(40),
                          rng=rng, **PPO)
     with pytest.raises(FloatingPointError, match="value fit epoch 1 minibatch 1: non-finite loss"):
         agent.fit_value(obs, np.full(40, 1e300), 1, 16, 1e-3, rng)
     with pytest.raises(FloatingPointError, match="BC epoch 1: non-finite parameters phi.W0"):
-        Agent(hidden=8).bc(obs, acts, 1, 64, np.inf, rng)           # one step with an infinite rate
+        Agent(hidden=8, n_y=6, **DEEP_SET).bc(obs, acts, 1, 64, np.inf, rng)     # an infinite rate
 
 
 def test_nan_in_a_run_names_round_and_update_and_main_says_so(tmp_path, monkeypatch, capsys):
     real = agent_module.ppo_loss
 
     def broken(*args, **kwargs):
-        loss, dout, info = real(*args, **kwargs)
-        return np.nan, dout, info
+        loss, dout = real(*args, **kwargs)
+        return np.nan, dout
     # the CLI's training, with a loss that goes bad handed in as the method's ppo_loss
     train = functools.partial(taskexp.train, pieces=taskexp.Pieces(ppo_loss=broken))
     monkeypatch.setattr(taskexp, "train", train)

@@ -6,10 +6,11 @@ import os
 import numpy as np
 import pytest
 
-import cli
 import taskexp
 from agent import Agent
-from env2d import BLOCK_H, BlockWorld, is_success, layer, same_spot
+from env2d import BlockWorld
+from taskexp_lib import cli
+from taskexp_lib.geometry import BLOCK_H, is_success, layer, same_spot
 
 
 @pytest.fixture
@@ -65,11 +66,11 @@ def test_select_goal_equation_1_and_ablations():
     cands = [{1: (0.0, 0.025)}] * 3
     agent = FixedValues(v0=[0.9, 0.1, 0.5], vT=[1.0, 0.6, 0.95])
     # ours: V(sT)-V(s0) = [0.1, 0.5, 0.45]; end2new: V(sT); init2new: -V(s0)
-    assert taskexp.select_goal(agent, s0, sT, cands, "ours")[0] == 1
-    assert taskexp.select_goal(agent, s0, sT, cands, "end2new")[0] == 0
-    assert taskexp.select_goal(agent, s0, sT, cands, "init2new")[0] == 1
+    assert taskexp.select_goal(agent, s0, sT, cands, "ours") == 1
+    assert taskexp.select_goal(agent, s0, sT, cands, "end2new") == 0
+    assert taskexp.select_goal(agent, s0, sT, cands, "init2new") == 1
     agent = FixedValues(v0=[0.9, 0.3, 0.2], vT=[1.0, 0.6, 0.95])
-    assert taskexp.select_goal(agent, s0, sT, cands, "init2new")[0] == 2
+    assert taskexp.select_goal(agent, s0, sT, cands, "init2new") == 2
 
 
 def test_relabel_uses_reached_positions(env):

@@ -1,6 +1,7 @@
 """Measure the behavioural check of exercise 7: greedy success after BC and after PPO, with the
 library's pieces (the reference) and with plausible mistakes plugged in.  The threshold and the
-minimum gain in exercises.EX7 were chosen from these figures.  ~15 s per run on one core.
+minimum gain in taskexp_lib.exercises.EX7 were chosen from these figures.  ~15 s per run on one
+core.
 
     python notebooks/exercises/measure_ex7.py reference 0 1 2 3 4
     python notebooks/exercises/measure_ex7.py ppo_sign 0 1        # ... or any name in VARIANTS
@@ -10,7 +11,7 @@ import sys
 import numpy as np
 
 import agent
-import exercises
+import taskexp_lib.exercises as exercises
 
 R = exercises.REFERENCE
 

@@ -1,16 +1,16 @@
 """nbgrader configuration of the taskexp exercises (tested with nbgrader 0.9.6).
 
-`python -m exercises course DIR` copies this file into DIR, the course root, and writes the
-assignment next to it. Run every nbgrader command in DIR:
+`python -m taskexp_lib.exercises course DIR` copies this file into DIR, the course root, and writes
+the assignment next to it. Run every nbgrader command in DIR:
 
     DIR/nbgrader_config.py           this file
-    DIR/source/taskexp/              the assignment: the seven instructor notebooks (solutions and
+    DIR/source/taskexp/              the assignment: the eight instructor notebooks (solutions and
                                      nbgrader metadata) and the student kit's library and checks
     nbgrader generate_assignment taskexp
     DIR/release/taskexp/             the student kit, to hand out as it is
     DIR/submitted/STUDENT/taskexp/   each student's folder as handed in (or nbgrader collect)
     nbgrader autograde taskexp       -> DIR/autograded/, scores in DIR/gradebook.db
-    nbgrader export                  -> grades.csv (16 points in all)
+    nbgrader export                  -> grades.csv (19 points in all)
 
 A notebook is graded in the student's folder after nbgrader copies the files of source/taskexp
 that are not notebooks (the library and the checks) over the student's, so a student cannot change
@@ -39,8 +39,8 @@ def kernel_imports_the_course():
     if not os.path.isdir(source):
         return
     python = KernelSpecManager().get_kernel_spec("python3").argv[0]
-    res = subprocess.run([python, "-B", "-c", "import exercises"], cwd=source, capture_output=True,
-                         text=True)
+    res = subprocess.run([python, "-B", "-c", "import taskexp_lib.exercises"], cwd=source,
+                         capture_output=True, text=True)
     if res.returncode != 0:
         last = (res.stderr.strip().splitlines() or ["(no message)"])[-1]
         raise SystemExit(f"nbgrader_config.py: the grading kernel's Python ({python}) cannot "

@@ -1,23 +1,18 @@
-"""exercises/notebooks.py -- load a student's notebook, their exercise 2's ActionDist, and the CLI.
-~190 lines.  The notebooks follow nbgrader's conventions (cell metadata, solution markers).
+"""exercises/notebooks.py -- the notebooks: load a student's functions from theirs (and the
+ActionDist of their exercise 2), and write the student or instructor versions of ours. The
+notebooks follow nbgrader's conventions (cell metadata, solution markers).
 """
 import glob
 import json
 import linecache
 import os
 import re
-import sys
 
-from .attention import check_ex8
-from .behaviour import check_ex7
-from .checks import check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6, passes
 from .dist import student_action_dist
-from .problems import FUNCTIONS, NOTEBOOKS, POINTS
+from .problems import FUNCTIONS, NOTEBOOKS
 
-NOTEBOOK_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                            "notebooks", "exercises")       # the instructor notebooks
-CHECKS = dict(ex1=check_ex1, ex2=check_ex2, ex3=check_ex3, ex4=check_ex4, ex5=check_ex5,
-              ex6=check_ex6, ex7=check_ex7, ex8=check_ex8)
+REPOSITORY = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+NOTEBOOK_DIR = os.path.join(REPOSITORY, "notebooks", "exercises")       # the instructor notebooks
 
 _loading = []         # the folders of the notebooks being loaded: action_dist() looks there
 
@@ -105,57 +100,3 @@ def write_notebooks(out_dir, student=True, src_dir=NOTEBOOK_DIR):
             json.dump(nb, f, indent=1, ensure_ascii=False)
             f.write("\n")
     return written
-
-
-USAGE = """usage: python -m exercises COMMAND
-  ex1 .. ex6, ex8 NOTEBOOK   check one exercise in your notebook, e.g. ex3 ex3_gae.ipynb
-  ex7 FOLDER            exercise 7: trains with the ex1-ex4 notebooks in FOLDER (e.g. .)
-  all FOLDER            check all eight notebooks in FOLDER, then the total
-  release OUT           (instructors) write the student kit into OUT
-  course DIR            (instructors) write an nbgrader course into DIR"""
-
-
-def check(exercise, notebook):
-    """Run one exercise's check on a notebook (ex7: a folder) -> passed (True/False); prints
-    PASS, or FAIL and what failed."""
-    try:
-        fns = functions(exercise, notebook)
-    except Exception as e:  # a broken notebook fails its exercise, not the run
-        print(f"{exercise} FAIL: could not run the notebook's cells: {type(e).__name__}: {e}")
-        return False
-    try:
-        return passes(CHECKS[exercise], *fns)
-    except Exception as e:  # a check the student's answer crashed still says FAIL
-        print(f"{exercise} FAIL: the check stopped: {type(e).__name__}: {e}")
-        return False
-
-
-def main(argv=None):
-    cmd, *rest = (sys.argv[1:] if argv is None else argv) or [None]
-    if cmd in ("release", "course") and len(rest) == 1:
-        from .kit import course, release
-        try:
-            print(f"wrote {(release if cmd == 'release' else course)(rest[0])}")
-        except ValueError as e:
-            print(e, file=sys.stderr)
-            return 2
-        return 0
-    if cmd in [*NOTEBOOKS, "all"] and not rest:
-        what = ("the folder of your notebooks" if cmd in ("all", "ex7") else
-                f"your notebook, e.g. {NOTEBOOKS[cmd]}")
-        print(f"which {'folder' if cmd in ('all', 'ex7') else 'notebook'}? "
-              f"python -m exercises {cmd} PATH, with PATH {what} ('.' in the student kit's "
-              "folder)", file=sys.stderr)
-        return 2
-    if cmd not in [*NOTEBOOKS, "all"] or len(rest) != 1:
-        print(USAGE, file=sys.stderr)
-        return 2
-    if cmd != "all":
-        return 0 if check(cmd, rest[0]) else 1
-    passed = {ex: check(ex, os.path.join(rest[0], NOTEBOOKS[ex]) if ex != "ex7" else rest[0])
-              for ex in NOTEBOOKS}
-    points = sum(POINTS[ex] for ex, ok in passed.items() if ok)
-    print(f"total: {points}/{sum(POINTS.values())} points; {sum(passed.values())} of "
-          f"{len(passed)} exercises pass" + ("" if all(passed.values()) else
-          f" (fail: {', '.join(ex for ex, ok in passed.items() if not ok)})"))
-    return 0 if all(passed.values()) else 1

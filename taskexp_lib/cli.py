@@ -1,5 +1,5 @@
-"""cli.py -- the plumbing around taskexp.train: command-line flags generated from taskexp.Config,
-the run directory, checkpoints after every round, resuming a stopped run, and progress bars.
+"""taskexp_lib/cli.py -- the plumbing around taskexp.train: command-line flags generated from
+Config, the run directory, checkpoints after every round, resuming a stopped run, progress bars.
 
     python taskexp.py --rounds 3            # the same as `taskexp --rounds 3` once installed
     python taskexp.py --help                         # every Config field is a flag
@@ -11,22 +11,24 @@ import argparse
 import ast
 import glob
 import inspect
-import json
 import os
 import sys
 import time
-import zipfile
-from dataclasses import asdict, fields
+from dataclasses import fields
 from functools import partial
 from typing import NamedTuple
 
 import numpy as np
 from tqdm import tqdm
 
-import report
 import taskexp
-from agent import FEATURES, NETWORKS, Agent
-from taskexp import SHAPES, Config, RunState
+from taskexp import SHAPES, RunState
+
+from . import report
+from .checkpoint import load_state, save_json, save_state, saved_results
+from .config import Config
+from .features import FEATURES
+from .nets import NETWORKS
 
 # --------------------------------------------------------------------------------------------
 # Flags: one per Config field, its help text the field's docstring
@@ -106,30 +108,6 @@ def problem(cfg):
     return None
 
 
-def saved_results(out):
-    """(results of the run in `out`, None), or (None, why not). results.json is read first; if it
-    is damaged, the copy inside state.npz (written just before it) serves."""
-    why = []
-    for name in ("results.json", "state.npz"):
-        path = os.path.join(out, name)
-        try:
-            if name == "results.json":
-                with open(path) as f:
-                    results = json.load(f)
-            else:
-                with np.load(path, allow_pickle=False) as z:
-                    results = json.loads(str(z["results"]))
-            results["rounds"][-1]["round"]           # a KeyError or IndexError: no round done
-            Config(**results["config"])              # a TypeError: not settings of this code
-            return results, None
-        except FileNotFoundError:
-            why.append(f"no {name}")
-        except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError, EOFError,
-                zipfile.BadZipFile) as e:
-            why.append(f"{name} unreadable: {type(e).__name__}")
-    return None, " and ".join(why)
-
-
 class Invocation(NamedTuple):
     """What the command line asks for."""
     cfg: Config             # the run's settings (saved ones when resuming)
@@ -201,84 +179,12 @@ def parse_args(argv=None):
 
 
 # --------------------------------------------------------------------------------------------
-# Checkpoints: after every round, state.npz holds all a run needs to go on as if never stopped
+# A run in a directory: after every round, a checkpoint and state.npz (checkpoint.py), which
+# holds all a run needs to go on as if never stopped
 # --------------------------------------------------------------------------------------------
-
-STATE_VERSION = 1
-STATE_KEYS = ("state_version", "round", "results", "run_rng", "buffer_obs", "buffer_act",
-              "all_tasks.states", "all_tasks.goals", "prev_tasks.states", "prev_tasks.goals")
-
 
 class ResumeError(ValueError):
     """state.npz is missing, unreadable, or from a run with other settings."""
-
-
-def tasks_to_arrays(tasks, n_blocks):
-    """[(s0 (n, 6), {block: (x, y)})] -> states (N, n, 6), goals (N, n, 3) of x, y and the goal's
-    place in the dict (nan: no goal). The order matters: alter() draws from list(goals)."""
-    states = np.stack([s0 for s0, _ in tasks])
-    goals = np.full((len(tasks), n_blocks, 3), np.nan)
-    for i, (_, g) in enumerate(tasks):
-        for order, (b, (x, y)) in enumerate(g.items()):
-            goals[i, b] = (x, y, order)
-    return states, goals
-
-
-def arrays_to_tasks(states, goals):
-    """Inverse of tasks_to_arrays."""
-    out = []
-    for s0, g in zip(states, goals):
-        blocks = sorted(np.flatnonzero(~np.isnan(g[:, 2])), key=lambda b: g[b, 2])
-        out.append((s0, {int(b): (float(g[b, 0]), float(g[b, 1])) for b in blocks}))
-    return out
-
-
-def save_state(path, agent, run, rng):
-    """After a round: the agent with its optimiser, the run's Generator, the RunState."""
-    arrays = {"state_version": np.array(STATE_VERSION), "round": np.array(run.last_round),
-              "results": np.array(json.dumps(run.results)),
-              "run_rng": np.array(json.dumps(rng.bit_generator.state)),
-              "buffer_obs": run.buffer_obs, "buffer_act": run.buffer_act, **agent.training_state()}
-    for name in ("all_tasks", "prev_tasks"):
-        arrays[f"{name}.states"], arrays[f"{name}.goals"] = tasks_to_arrays(getattr(run, name),
-                                                                            agent.n_blocks)
-    agent.save(path, extra=arrays)
-
-
-def load_state(path, cfg, rng):
-    """Read what save_state wrote for a run with settings cfg; restore rng -> (agent, RunState).
-    ValueError naming the file when it is unreadable or from other settings."""
-    template = taskexp.make_agent(cfg)
-    saved, data = Agent.load(path, extra=STATE_KEYS + tuple(template.training_state()))
-    if int(data["state_version"]) != STATE_VERSION:
-        raise ValueError(f"{path}: state_version {data['state_version']}, expected {STATE_VERSION}")
-    results = json.loads(str(data["results"]))
-    ours, theirs = asdict(cfg), dict(results["config"])
-    ours["shapes"], theirs["rounds"] = list(ours["shapes"]), ours["rounds"]   # rounds may grow
-    if ours != theirs:
-        diff = {k: (theirs.get(k), v) for k, v in ours.items() if theirs.get(k) != v}
-        raise ValueError(f"{path}: saved by a run with other settings (saved, now): {diff}")
-    results["config"] = asdict(cfg)
-    saved.load_training_state(data, path)
-    rng.bit_generator.state = json.loads(str(data["run_rng"]))
-    run = RunState(last_round=int(data["round"]), buffer_obs=data["buffer_obs"],
-                   buffer_act=data["buffer_act"], results=results)
-    for name in ("all_tasks", "prev_tasks"):
-        setattr(run, name, arrays_to_tasks(data[f"{name}.states"], data[f"{name}.goals"]))
-    return saved, run
-
-
-def save_json(path, obj):
-    """Write JSON atomically (a temporary file, then a rename), like agent.save_npz: a run
-    killed mid-write leaves the previous file intact."""
-    tmp = f"{path}.tmp{os.getpid()}"
-    try:
-        with open(tmp, "w") as f:
-            json.dump(obj, f, indent=1)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.remove(tmp)
 
 
 def peak_memory_mb():
@@ -290,10 +196,6 @@ def peak_memory_mb():
     kb = 2**20 if sys.platform == "darwin" else 2**10        # ru_maxrss: bytes on macOS, else kB
     return round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / kb)
 
-
-# --------------------------------------------------------------------------------------------
-# A run in a directory
-# --------------------------------------------------------------------------------------------
 
 # tqdm on a terminal; nothing when the output goes to a file, so logs stay readable
 terminal_bar = partial(tqdm, leave=False, disable=None, dynamic_ncols=True)
@@ -311,7 +213,8 @@ def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar, workers=1):
     agent, state = None, None
     if resume:
         try:
-            agent, state = load_state(state_path, cfg, rng)
+            agent, saved = load_state(state_path, cfg, rng, taskexp.make_agent(cfg))
+            state = RunState(**saved)
         except (OSError, ValueError) as e:
             raise ResumeError(f"cannot resume: {e}") from None
         # state.npz is written before results.json: a kill between the two leaves results.json

@@ -1,10 +1,10 @@
-"""report.py -- what a run reports: the statistics of generated tasks, Tables 1 and 2 of the paper
-as markdown, and Figures 1 and 2 as PNG files."""
+"""taskexp_lib/report.py -- what a run reports: the statistics of generated tasks, Tables 1 and 2
+of the paper as markdown, and Figures 1 and 2 as PNG files."""
 import os
 
 import numpy as np
 
-from env2d import layer
+from .geometry import layer
 
 
 def task_stats(goals, lengths, n_blocks):

@@ -1,21 +1,20 @@
-"""exercises/attention.py -- the check of exercise 8: the backward pass of one self-attention layer
-(agent.SelfAttention) over block tokens.  ~150 lines.
+"""exercises/ex8.py -- exercise 8: the backward pass of one self-attention layer over block tokens
+(taskexp_lib.nn.SelfAttention).
 
 The student writes attention_backward(params, cache, dout) -> (grads, dx), where cache is what
-SelfAttention.forward keeps. The check compares it with the reference (agent.SelfAttention.backward,
-through checks.REFERENCE) on one and two heads, one token, one sequence and saturated attention, and
-with central finite differences through agent.SelfAttention.forward. Its hint is chosen by which
-gradients are wrong and how: a constant factor (1/sqrt(d)), dS rows that do not sum to zero (the
-softmax Jacobian: grads["bk"] must be 0), transposed keys (grads["bq"] = 0), dx alone (x feeds Q,
-K and V).
+SelfAttention.forward keeps. The check compares it with the reference (SelfAttention.backward, run
+on the cache by reference_attention_backward) on one and two heads, one token, one sequence and
+saturated attention, and with central finite differences through SelfAttention.forward. Its hint
+is chosen by which gradients are wrong and how: a constant factor (1/sqrt(d)), dS rows that do not
+sum to zero (the softmax Jacobian: grads["bk"] must be 0), transposed keys (grads["bq"] = 0), dx
+alone (x feeds Q, K and V).
 """
 import copy
 
 import numpy as np
 
-import agent
-
-from .checks import REFERENCE, Report, call_backward, diff, first, graded, numerical_grad
+from .. import nn
+from .grader import Report, call_backward, diff, first, graded, numerical_grad
 from .vectors import case
 
 NAMES = ("Wq", "Wk", "Wv", "Wo", "bq", "bk", "bv", "bo")
@@ -42,6 +41,13 @@ HINTS = dict(
               "out = (x Wv + bv) Wo + bo",
     large="large logits saturate the softmax (rows of A near one-hot): use the cached attn, "
           "do not recompute exp of the scores")
+
+# (name, B, tokens n, width D, heads, query and key weight scale, hint); case i has seed 800 + i
+CASES = [("one head", 3, 4, 4, 1, 1.0, HINTS["scores"]),
+         ("two heads", 2, 5, 6, 2, 1.0, HINTS["scores"]),
+         ("one token (n = 1)", 3, 1, 4, 2, 1.0, HINTS["one_token"]),
+         ("one sequence (B = 1), three heads", 1, 6, 6, 3, 1.0, HINTS["scores"]),
+         ("large logits (saturated attention)", 2, 4, 4, 1, 6.0, HINTS["large"])]
 
 
 def _tiny(a, ref):
@@ -84,8 +90,22 @@ def diagnose(grads, want, bad, default):
     return HINTS["scores"]
 
 
-def _make_ex8(B, n, D, heads, scale, seed):
-    att = agent.SelfAttention(D, heads, seed=seed)
+def reference_attention_backward(params, cache, dout):
+    """nn.SelfAttention.backward on a forward's cache (as check_ex8 hands it to students), in
+    the student's signature."""
+    B, n, D = cache["x"].shape
+    att = nn.SelfAttention(D, cache["heads"])
+    att.params = {k: np.array(v, dtype=np.float64) for k, v in params.items()}
+    att.x2, att.Y = cache["x"].reshape(B * n, D), cache["Y"].reshape(B * n, D)
+    att.Q, att.K, att.V, att.attn = cache["Q"], cache["K"], cache["V"], cache["attn"]
+    grads = att.backward(dout)
+    return grads, att.dx
+
+
+def make_case(B, n, D, heads, scale, seed):
+    """A layer with scaled query and key weights and random biases, its forward on random x
+    (the cache), and the reference gradients for a random dout."""
+    att = nn.SelfAttention(D, heads, seed=seed)
     rng = np.random.default_rng(seed)
     for c in "qk":
         att.params[f"W{c}"] *= scale
@@ -95,33 +115,38 @@ def _make_ex8(B, n, D, heads, scale, seed):
     att.forward(x)
     cache = dict(x=x, Q=att.Q, K=att.K, V=att.V, attn=att.attn, Y=att.Y.reshape(B, n, D),
                  heads=heads, scale=att.scale)
-    grads, dx = REFERENCE["attention_backward"](att.params, cache, dout)
+    grads, dx = reference_attention_backward(att.params, cache, dout)
     return dict(params=att.params, cache=cache, dout=dout, grads=grads, dx=dx)
+
+
+def finite_differences(grads, dx, c):
+    """The problem, if any, of the student's grads and dx against central finite differences of
+    sum(forward(x) * dout), whose gradient w.r.t. the output is dout."""
+    B, n, D = c["cache"]["x"].shape
+    att = nn.SelfAttention(D, c["cache"]["heads"])
+    att.params = copy.deepcopy(c["params"])
+    x = c["cache"]["x"].copy()
+    f = lambda: np.sum(att.forward(x) * c["dout"])
+    return first(*(diff(f"grads[{k!r}] vs finite differences", grads[k],
+                        numerical_grad(f, att.params[k]), 1e-5, 1e-6) for k in NAMES),
+                 diff("dx vs finite differences", dx, numerical_grad(f, x), 1e-5, 1e-6))
 
 
 @graded
 def check_ex8(attention_backward):
-    """attention_backward(params, cache, dout) -> (grads, dx), against agent.SelfAttention.backward
-    and central finite differences."""
+    """attention_backward(params, cache, dout) -> (grads, dx), against
+    taskexp_lib.nn.SelfAttention.backward and central finite differences."""
     rep = Report("ex8")
-    cases = [("one head", 3, 4, 4, 1, 1.0, HINTS["scores"]),
-             ("two heads", 2, 5, 6, 2, 1.0, HINTS["scores"]),
-             ("one token (n = 1)", 3, 1, 4, 2, 1.0, HINTS["one_token"]),
-             ("one sequence (B = 1), three heads", 1, 6, 6, 3, 1.0, HINTS["scores"]),
-             ("large logits (saturated attention)", 2, 4, 4, 1, 6.0, HINTS["large"])]
-    for seed, (name, B, n, D, heads, scale, hint) in enumerate(cases):
-        c = case(f"ex8/{seed}", lambda: _make_ex8(B, n, D, heads, scale, 800 + seed))
+    for seed, (name, B, n, D, heads, scale, hint) in enumerate(CASES):
+        c = case(f"ex8/{seed}", lambda: make_case(B, n, D, heads, scale, 800 + seed))
         want, want_dx = c["grads"], c["dx"]
         detail = f"B={B}, n={n}, D={D}, heads={heads}, seed {800 + seed}"
-        res, err = call_backward(attention_backward, c["params"], c["cache"], c["dout"])
+        res, err = call_backward(attention_backward, c["params"], c["cache"], c["dout"],
+                                 keys=NAMES)
         if err:
             rep.case(name, detail, err, hint)
             continue
         grads, dx = res
-        missing = [k for k in NAMES if k not in grads]
-        if missing:
-            rep.case(name, detail, f"grads has no key {missing[0]!r}", hint)
-            continue
         problems = {k: diff(f"grads[{k!r}]", grads[k], want[k]) for k in NAMES}
         problems["dx"] = diff("dx", dx, want_dx)
         bad = {k for k, p in problems.items() if p}
@@ -130,14 +155,6 @@ def check_ex8(attention_backward):
         rep.case(name, detail, first(*problems.values()),
                  diagnose(grads, want, bad, hint) if shapes_ok else hint)
         if name == "two heads" and not rep.failures:    # and against the definition of a gradient
-            att = agent.SelfAttention(D, heads)
-            att.params = copy.deepcopy(c["params"])
-            x = c["cache"]["x"].copy()
-            f = lambda: np.sum(att.forward(x) * c["dout"])       # dL/dout = dout
-            rep.case("finite differences", detail,
-                     first(*(diff(f"grads[{k!r}] vs finite differences", grads[k],
-                                  numerical_grad(f, att.params[k]), 1e-5, 1e-6) for k in NAMES),
-                           diff("dx vs finite differences", dx, numerical_grad(f, x), 1e-5,
-                                1e-6)), hint)
-    rep.done(" (agrees with the reference, agent.SelfAttention.backward, and central finite "
-             "differences)")
+            rep.case("finite differences", detail, finite_differences(grads, dx, c), hint)
+    rep.done(" (agrees with the reference, taskexp_lib.nn.SelfAttention.backward, and central "
+             "finite differences)")

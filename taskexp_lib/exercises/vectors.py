@@ -2,13 +2,13 @@
 
 A case is data: its inputs and the expected outputs, a dict made by a `make()` function of the
 check. In the repository, make() runs on the full library (the reference). A student kit has no
-reference code (its exercised functions are stubs), so `python -m exercises release` runs every
-make() once and writes the results into the kit as exercises/vectors.json: the kit's checks read
-numbers, not answer code. A kit is recognised by that file.
+reference code (its exercised functions are stubs), so `python -m taskexp_lib.exercises release`
+runs every make() once and writes the results into the kit as taskexp_lib/exercises/vectors.json:
+the kit's checks read numbers, not answer code. A kit is recognised by that file.
 
 JSON keeps the numbers exact (floats are written with repr, which reads back to the same float64)
 and readable. Arrays, tuples and dicts with int keys (goals) are tagged so they read back as they
-were. ~80 lines.
+were.
 """
 import json
 import os
@@ -35,7 +35,7 @@ def case(key, make):
             with open(FILE) as f:
                 _stored = json.load(f)["cases"]
         if key not in _stored:
-            raise KeyError(f"exercises/vectors.json has no case {key!r}: "
+            raise KeyError(f"taskexp_lib/exercises/vectors.json has no case {key!r}: "
                            "this kit is older than its checks; ask for a new one")
         return decode(_stored[key])
     data = make()

@@ -1,4 +1,5 @@
-"""config.py -- every hyperparameter of a run in one documented dataclass (CleanRL-style).
+"""taskexp_lib/config.py -- every hyperparameter of a run in one documented dataclass (as in
+CleanRL).
 
 Each field's docstring says what it is, the section of the paper it belongs to, and why an unusual
 value was chosen; cli.py turns every field into a command-line flag with that text as its help.
@@ -60,8 +61,7 @@ class Config:
     stretch: float = 2.0
     """not in the paper: extra episodes per PPO update, as a fraction of ppo_episodes, on
     one-alteration variants of the tasks, so that V(s, g) learns what it cannot reach yet; with
-    plain features V must learn from them whether a goal has a support (0.5 -> 2.0: the share
-    of feasible goals among those equation (1) picks rose from 25% to 39%, seed 0)"""
+    plain features V must learn from them whether a goal has a support (README, design notes)"""
     ppo_epochs: int = 4
     """PPO epochs over each batch"""
     ppo_minibatch: int = 256

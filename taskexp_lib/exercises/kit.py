@@ -1,8 +1,8 @@
-"""exercises/kit.py -- the student kit, and the nbgrader course that makes the same kit.  ~190
-lines.
+"""exercises/kit.py -- the student kit, and the nbgrader course that makes the same kit.
 
-    python -m exercises release OUT   the student kit: hand OUT to students
-    python -m exercises course DIR    an nbgrader course (notebooks/exercises/nbgrader_config.py)
+    python -m taskexp_lib.exercises release OUT   the student kit: hand OUT to students
+    python -m taskexp_lib.exercises course DIR    an nbgrader course (its nbgrader_config.py:
+                                                  notebooks/exercises/nbgrader_config.py)
 
 A kit is self-contained: copied anywhere, with only requirements.txt installed, its notebooks
 import and its checks run. It holds no answer: the library's reference solution of every
@@ -22,13 +22,15 @@ import shutil
 import numpy as np
 
 from . import vectors
-from .attention import check_ex8
-from .checks import check_ex1, check_ex2, check_ex3, check_ex4, check_ex5, check_ex6
+from .checks import CHECKS
 from .notebooks import NOTEBOOK_DIR, write_notebooks
 from .problems import FUNCTIONS, NOTEBOOKS, POINTS
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))      # the repository
-LIBRARY = ["agent", "taskexp", "env2d", "config", "rollout", "report", "cli"]   # pyproject's
+PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))   # taskexp_lib
+ROOT = os.path.dirname(PACKAGE)                                         # the repository
+# the modules the wheel installs (pyproject.toml), as dotted names
+LIBRARY = ["taskexp", "env2d", "agent"] + sorted(
+    f"taskexp_lib.{os.path.basename(p)[:-3]}" for p in glob.glob(os.path.join(PACKAGE, "*.py")))
 ASSIGNMENT = "taskexp"                                           # the nbgrader assignment's name
 
 # The reference solutions: what each exercise asks for, as the library has it. In a kit each is
@@ -37,15 +39,21 @@ ASSIGNMENT = "taskexp"                                           # the nbgrader 
 # the student's functions (sampling and the mode are ActionDist's own, on the student's
 # log_softmax). ex5: taskexp.random_position is the reference's draw of a new position.
 EXERCISED = {
-    "ex1": [("agent", "mlp_backward")],
+    "ex1": [("taskexp_lib.nn", "mlp_backward")],
     "ex2": [("agent", "log_softmax"), ("agent", "entropy_of"), ("agent", "ActionDist.log_prob"),
             ("agent", "ActionDist.entropy"), ("agent", "ActionDist.backward")],
     "ex3": [("agent", "gae")],
     "ex4": [("agent", "ppo_loss")],
     "ex5": [("taskexp", "alter"), ("taskexp", "random_position")],
     "ex6": [("taskexp", "select_goal"), ("taskexp", "relabel")],
-    "ex8": [("agent", "softmax_backward"), ("agent", "SelfAttention.backward")],
+    "ex8": [("taskexp_lib.nn", "softmax_backward"), ("taskexp_lib.nn", "SelfAttention.backward")],
 }
+
+
+def source_file(module, root=ROOT):
+    """The file of a library module named with dots (taskexp_lib.nn) in the folder `root`."""
+    return os.path.join(root, *module.split(".")) + ".py"
+
 
 def find_function(tree, qualname):
     """The FunctionDef of `name` or `Class.name` at the top level of a module's syntax tree."""
@@ -95,7 +103,7 @@ def reference_code():
     bodies = []
     for names in EXERCISED.values():
         for module, qualname in names:
-            with open(os.path.join(ROOT, f"{module}.py")) as f:
+            with open(source_file(module)) as f:
                 source = f.read()
             first, last = body_lines(source, qualname)
             bodies.append((f"{module}.{qualname}", source.splitlines()[first - 1:last]))
@@ -146,12 +154,11 @@ def record_vectors():
 
     def not_mine(*args, **kwargs):
         raise NotImplementedError()
-    checks = dict(ex1=check_ex1, ex2=check_ex2, ex3=check_ex3, ex4=check_ex4, ex5=check_ex5,
-                  ex6=check_ex6, ex8=check_ex8)
     with vectors.recording() as cases, contextlib.redirect_stdout(io.StringIO()):
-        for ex, check in checks.items():
-            with contextlib.suppress(AssertionError):     # each case is made before it is run
-                check(*[not_mine] * len(FUNCTIONS[ex]))
+        for ex, check in CHECKS.items():
+            if ex in FUNCTIONS:                           # ex7 has no cases: it trains
+                with contextlib.suppress(AssertionError):  # each case is made before it is run
+                    check(*[not_mine] * len(FUNCTIONS[ex]))
     return cases
 
 
@@ -163,7 +170,7 @@ def _target(out):
             os.path.realpath(ROOT).startswith(real + os.sep):
         raise ValueError(f"a kit in {out} would overwrite the repository's library or notebooks")
     if os.path.isdir(out) and os.listdir(out) and not os.path.exists(
-            os.path.join(out, "exercises", "vectors.json")):
+            os.path.join(out, "taskexp_lib", "exercises", "vectors.json")):
         raise ValueError(f"{out} is not empty and holds no earlier kit: choose a new folder")
 
 
@@ -173,18 +180,19 @@ def write_kit(out, student=True):
     requirements.txt and README.md.  -> out"""
     _target(out)
     cases = record_vectors()
-    os.makedirs(os.path.join(out, "exercises"), exist_ok=True)
+    kit_exercises = os.path.join(out, "taskexp_lib", "exercises")
+    os.makedirs(kit_exercises, exist_ok=True)
     write_notebooks(out, student)
     for module in LIBRARY:
-        with open(os.path.join(ROOT, f"{module}.py")) as f:
+        with open(source_file(module)) as f:
             source = f.read()
-        with open(os.path.join(out, f"{module}.py"), "w") as f:
+        with open(source_file(module, out), "w") as f:
             f.write(stub(source, module))
     for path in glob.glob(os.path.join(os.path.dirname(os.path.abspath(__file__)), "*.py")):
-        shutil.copyfile(path, os.path.join(out, "exercises", os.path.basename(path)))
-    with open(os.path.join(out, "exercises", "vectors.json"), "w") as f:
+        shutil.copyfile(path, os.path.join(kit_exercises, os.path.basename(path)))
+    with open(os.path.join(kit_exercises, "vectors.json"), "w") as f:
         json.dump(dict(about="the checks' cases: inputs and expected outputs, recorded from the "
-                             "reference solutions by python -m exercises release",
+                             "reference solutions by python -m taskexp_lib.exercises release",
                        numpy=np.__version__, cases=cases), f)
     shutil.copyfile(os.path.join(ROOT, "requirements.txt"), os.path.join(out, "requirements.txt"))
     with open(os.path.join(out, "README.md"), "w") as f:
@@ -265,16 +273,17 @@ Work in order: exercise 4 uses your exercise 2 (its `ActionDist` runs your
 Run a notebook's last cell: it prints PASS, or stops with an AssertionError that says what
 failed. Or, in a terminal in this folder:
 
-    python -m exercises ex3 ex3_gae.ipynb     # one exercise
-    python -m exercises ex7 .                 # exercise 7: trains with your ex1-ex4
-    python -m exercises all .                 # all eight, then your total
+    python -m taskexp_lib.exercises ex3 ex3_gae.ipynb   # one exercise
+    python -m taskexp_lib.exercises ex7 .               # exercise 7: trains with your ex1-ex4
+    python -m taskexp_lib.exercises all .               # all eight, then your total
 
 ## What is in this folder
 
 - `ex1_mlp_backward.ipynb` ... `ex8_attention_backward.ipynb`: the exercises; hand these in.
-- `agent.py`, `taskexp.py`, `env2d.py`, `config.py`, `rollout.py`, `report.py`, `cli.py`: the
-  taskexp library that the notebooks import. The functions you write are stubs here (they raise
-  NotImplementedError); where the library needs them, exercise 7 runs it on yours.
-- `exercises/`: the checks. `exercises/vectors.json` holds their cases, inputs and expected
-  outputs, recorded from the reference solutions.
+- `taskexp.py` (the method), `env2d.py` (the world), `agent.py` (the agent) and `taskexp_lib/`
+  (what they are built from): the taskexp library that the notebooks import. The functions you
+  write are stubs here (they raise NotImplementedError); where the library needs them, exercise 7
+  runs it on yours.
+- `taskexp_lib/exercises/`: the checks, a file per exercise. `taskexp_lib/exercises/vectors.json`
+  holds their cases, inputs and expected outputs, recorded from the reference solutions.
 """

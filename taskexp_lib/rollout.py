@@ -1,6 +1,6 @@
-"""rollout.py -- episodes of the goal-conditioned policy in the block world (sec 3): a batch of
-tasks run over several worlds at once, with one batched policy call per step, and the physics of
-those worlds in worker processes when there is more than one core.
+"""taskexp_lib/rollout.py -- episodes of the goal-conditioned policy in the block world (sec 3):
+a batch of tasks run over several worlds at once, with one batched policy call per step, and the
+physics of those worlds in worker processes when there is more than one core.
 
 Results do not depend on the number of workers: a step is a pure function of (state, action)
 (env2d.BlockWorld.simulate), and every random draw happens in the main process.
@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from env2d import BlockWorld, observation
+from env2d import BlockWorld
+
+from .geometry import observation
 
 _WORLD = None                  # a worker's own BlockWorld, which simulates for the main process
 

@@ -1,0 +1,24 @@
+"""taskexp_lib -- everything of taskexp besides the method (taskexp.py), the world (env2d.py) and
+the agent (agent.py): what those three are built from, and the plumbing around them.
+
+  config.py      Config: every hyperparameter of a run, documented, each a command-line flag
+  geometry.py    the world's geometry: blocks, table, the x grid, layers, success
+  draw.py        pictures of scenes and episodes
+  nn.py          the layers, each forward next to its backward; Adam (numpy only)
+  features.py    what the networks see of each block
+  nets.py        the attention network and the deep set over block tokens
+  rollout.py     batched episodes, and the worker processes that run the physics
+  checkpoint.py  every file a run writes: checkpoints, the resume state, results.json
+  report.py      Tables 1 and 2, Figures 1 and 2
+  cli.py         the command line: flags, the run directory, --resume, progress bars
+  stress.py      stress actions for the physics tests and benchmarks
+  exercises/     the graded problem set: a grader and one file per exercise
+"""
+from threadpoolctl import threadpool_limits
+
+
+def one_blas_thread():
+    """Pin BLAS to one thread: the networks' matmuls are tiny, so with more threads they run
+    10-100x slower, and results change with the thread count. A context manager for a block
+    (taskexp.train runs in one); called on its own, for the rest of the program (a notebook)."""
+    return threadpool_limits(limits=1)

@@ -1,0 +1,107 @@
+"""taskexp_lib/features.py -- what the networks see of a block (sec 3): the features of each block
+token, computed from an observation.
+
+"plain": a block's pose and its goal, on their own (the default). "relations": plus stacking
+preconditions computed by hand (RELATIONS), which a network over plain features must learn by
+comparing blocks (self-attention does). The world's geometry comes from geometry.py.
+"""
+import numpy as np
+
+from .geometry import BLOCK_H, BLOCK_W, TABLE_X, THRESHOLD, layer
+
+N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the table
+
+
+# The feature layout: (name, width) of each column group, in order; n_y is the number of layers.
+# Tests and notebooks find a feature by name (feature_columns), never by its column number.
+# The features: "plain" (what one block and its goal are) or "relations" (plus RELATIONS,
+# stacking preconditions computed by hand, which a network over plain features must learn).
+FEATURES = ("plain", "relations")
+
+
+def feature_layout(n_y, features="relations"):
+    plain = [("x", 1), ("y", 1), ("cos", 1), ("sin", 1), ("has_goal", 1), ("goal_x", 1),
+             ("goal_y", 1), ("to_goal_x", 1), ("to_goal_y", 1), ("at_goal", 1),
+             ("layer", n_y), ("goal_layer", n_y), ("x_rbf", N_RBF), ("goal_x_rbf", N_RBF)]
+    if features == "plain":
+        return plain
+    return plain + [*[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
+
+
+def feature_columns(n_y, features="relations"):
+    """{feature name: slice of its columns} for features made with n_y layers."""
+    out, start = {}, 0
+    for name, width in feature_layout(n_y, features):
+        out[name], start = slice(start, start + width), start + width
+    return out
+
+
+def featurize(obs, n_y=None, features="relations"):
+    """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, F), laid out as
+    feature_layout(n_y, features) says (F = 10 + 2 n_y + 2 N_RBF plain, 15 + 2 n_y + 3 N_RBF
+    with the relations).
+
+    Besides normalised pose, goal and offset to goal, each block gets one-hot codes of its layer
+    and goal layer and RBF codes of its x and goal x: what it is and where it wants to be, on
+    its own. Which block rests under which, or whose goal lies on whose, is a relation between
+    two blocks: features="relations" adds hand-computed ones (RELATIONS); with "plain" the
+    network must find them itself (self-attention compares every pair of blocks).
+    Goal columns are multiplied by has_goal, so "no goal" is all zeros. The world's geometry
+    comes from env2d.
+    """
+    if features not in FEATURES:
+        raise ValueError(f"features {features!r}: one of {FEATURES}")
+    obs = np.asarray(obs, dtype=np.float64)
+    if obs.ndim != 3 or obs.shape[-1] != 6:
+        raise ValueError(f"obs must have shape (B, n, 6), got {obs.shape}")
+    n_y = obs.shape[1] if n_y is None else n_y
+    w, h = BLOCK_W, BLOCK_H
+    half, mid = (TABLE_X[1] - TABLE_X[0]) / 2, (TABLE_X[1] + TABLE_X[0]) / 2
+    x, y, ang, gx, gy, g = (obs[..., j] for j in range(6))
+    g = (g > 0.5).astype(np.float64)
+    dist = np.hypot(gx - x, gy - y)
+    onehot_layer = lambda v: np.eye(n_y)[np.clip(layer(v), 0, n_y - 1)]    # (B, n) -> (B, n, n_y)
+    centres = np.linspace(TABLE_X[0], TABLE_X[1], N_RBF)
+    rbf = lambda v: np.exp(-0.5 * ((v[..., None] - centres) / (w / 4)) ** 2)
+    at_goal = g * (dist < THRESHOLD)
+    cols = [(x - mid) / half, y / (n_y * h), np.cos(ang), np.sin(ang), g,
+            g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h, at_goal]
+    plain = [np.stack(cols, -1), onehot_layer(y), g[..., None] * onehot_layer(gy), rbf(x),
+             g[..., None] * rbf(gx)]
+    if features == "plain":
+        return np.concatenate(plain, axis=-1)
+    rel = relations(x, y, gx, gy, g, at_goal)
+    return np.concatenate([*plain, np.stack([rel[name] for name in RELATIONS], -1),
+                           rel["needs_support"][..., None] * rbf(gx)], axis=-1)
+
+
+# Hand-computed stacking preconditions: what self-attention over blocks would have to learn.
+RELATIONS = ("blocked", "supported", "wait", "first", "covered")
+
+
+def relations(x, y, gx, gy, g, at_goal):
+    """Pairwise facts about blocks and goals, pooled over the other blocks j (what attention finds).
+
+    All inputs (B, n).  Returns {name: (B, n)} for the RELATIONS and needs_support:
+      blocked     another block overlaps my goal spot now (placing me there would be a no-op)
+      supported   my goal is on the table, or another block rests right under my goal spot now
+      wait        another unreached goal lies under mine: that block must go first
+      first       my goal lies under another block's goal: I am its support
+      covered     a block rests on me now
+      needs_support  has goal, not reached, not supported: a free block must go under it, and
+                  the RBF code of its goal x (pooled) tells the free blocks where
+    """
+    w, h = BLOCK_W, BLOCK_H
+    other = 1.0 - np.eye(x.shape[1])                                   # (n, n): j != i
+    # (B, i, j): is |a_j - b_i| < tol
+    near = lambda a, b, tol: (np.abs(a[:, None, :] - b[:, :, None]) < tol)
+    any_j = lambda m: (m * other).max(-1)
+    pending = g * (1.0 - at_goal)                                      # goals not reached yet
+    out = dict(
+        blocked=g * any_j(near(x, gx, w * 0.95) & near(y, gy, h * 0.95)),
+        supported=g * np.maximum(gy < h, any_j(near(x, gx, w / 2) & near(y, gy - h, h / 2))),
+        wait=g * any_j(pending[:, None, :] * (near(gx, gx, w) & near(gy, gy - h, h / 2))),
+        first=g * any_j(g[:, None, :] * (near(gx, gx, w) & near(gy - h, gy, h / 2))),
+        covered=any_j(near(x, x, w) & near(y - h, y, h / 2)))
+    out["needs_support"] = pending * (1.0 - out["supported"])
+    return out
