@@ -141,7 +141,8 @@ def ppo_stats(dist, actions, logp_old, adv, clip):
     """What a PPO minibatch update logs, from the policy `dist` it started from:
     (L_clip, mean entropy, approx KL, clip fraction). The KL estimate mean (r - 1) - log r is
     unbiased and non-negative."""
-    r = np.exp(dist.log_prob(actions) - logp_old)
+    log_ratio = dist.log_prob(actions) - logp_old
+    r = np.exp(log_ratio)
     l_clip = -np.minimum(r * adv, np.clip(r, 1 - clip, 1 + clip) * adv).mean()
     return l_clip, dist.entropy().mean(), np.mean(r - 1 - np.log(r)), np.mean(np.abs(r - 1) > clip)
 

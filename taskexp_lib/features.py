@@ -19,7 +19,7 @@ N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the tabl
 FEATURES = ("plain", "relations")
 
 
-def feature_layout(n_y, features="relations"):
+def feature_layout(n_y, features):
     plain = [("x", 1), ("y", 1), ("cos", 1), ("sin", 1), ("has_goal", 1), ("goal_x", 1),
              ("goal_y", 1), ("to_goal_x", 1), ("to_goal_y", 1), ("at_goal", 1),
              ("layer", n_y), ("goal_layer", n_y), ("x_rbf", N_RBF), ("goal_x_rbf", N_RBF)]
@@ -28,7 +28,7 @@ def feature_layout(n_y, features="relations"):
     return plain + [*[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
 
 
-def feature_columns(n_y, features="relations"):
+def feature_columns(n_y, features):
     """{feature name: slice of its columns} for features made with n_y layers."""
     out, start = {}, 0
     for name, width in feature_layout(n_y, features):
@@ -36,7 +36,7 @@ def feature_columns(n_y, features="relations"):
     return out
 
 
-def featurize(obs, n_y=None, features="relations"):
+def featurize(obs, n_y, features):
     """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, F), laid out as
     feature_layout(n_y, features) says (F = 10 + 2 n_y + 2 N_RBF plain, 15 + 2 n_y + 3 N_RBF
     with the relations).
@@ -46,15 +46,13 @@ def featurize(obs, n_y=None, features="relations"):
     its own. Which block rests under which, or whose goal lies on whose, is a relation between
     two blocks: features="relations" adds hand-computed ones (RELATIONS); with "plain" the
     network must find them itself (self-attention compares every pair of blocks).
-    Goal columns are multiplied by has_goal, so "no goal" is all zeros. The world's geometry
-    comes from env2d.
+    Goal columns are multiplied by has_goal, so "no goal" is all zeros; n_y layers are coded.
     """
     if features not in FEATURES:
         raise ValueError(f"features {features!r}: one of {FEATURES}")
     obs = np.asarray(obs, dtype=np.float64)
     if obs.ndim != 3 or obs.shape[-1] != 6:
         raise ValueError(f"obs must have shape (B, n, 6), got {obs.shape}")
-    n_y = obs.shape[1] if n_y is None else n_y
     w, h = BLOCK_W, BLOCK_H
     half, mid = (TABLE_X[1] - TABLE_X[0]) / 2, (TABLE_X[1] + TABLE_X[0]) / 2
     x, y, ang, gx, gy, g = (obs[..., j] for j in range(6))

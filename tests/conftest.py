@@ -1,4 +1,7 @@
-"""Figures draw off-screen (agent.py pins BLAS to one thread for every test)."""
+"""Figures draw off-screen, and BLAS has one thread for every test, as in a run."""
 import matplotlib
 
+from taskexp_lib import one_blas_thread
+
 matplotlib.use("Agg")
+one_blas_thread()

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from agent import ActionDist, Agent, bc_loss, entropy_of, gae, log_softmax, ppo_loss, value_loss
-from taskexp_lib.exercises.checks import numerical_grad  # central differences, step 1e-6
+from taskexp_lib.exercises.grader import numerical_grad  # central differences, step 1e-6
 from taskexp_lib.features import RELATIONS, feature_columns, featurize, relations
 from taskexp_lib.geometry import GEOMETRY
 from taskexp_lib.nets import SetNet
@@ -204,7 +204,7 @@ def test_featurize_codes():
     obs[0, :, :2] = [[0.0, 0.025], [0.2, 0.075], [-0.3, 0.025]]
     obs[0, 0, 3:] = [0.005, 0.025, 1.0]                         # satisfied (0.5 cm away)
     obs[0, 1, 3:] = [-0.2, 0.125, 1.0]                          # not satisfied
-    f, col = featurize(obs, n_y=3)[0], feature_columns(3)
+    f, col = featurize(obs, 3, "relations")[0], feature_columns(3, "relations")
     assert f.shape == (3, 15 + 2 * 3 + 3 * 21) and max(c.stop for c in col.values()) == f.shape[-1]
     assert list(f[:, col["at_goal"]][:, 0]) == [1, 0, 0]
     assert np.array_equal(f[:, col["layer"]], np.eye(3)[[0, 1, 0]])
@@ -223,7 +223,7 @@ def test_plain_features_are_the_relations_features_without_the_relations(tmp_pat
     plain, full = featurize(obs, 6, "plain"), featurize(obs, 6, "relations")
     assert plain.shape[-1] == 10 + 2 * 6 + 2 * 21
     assert np.array_equal(plain, full[..., : plain.shape[-1]])
-    assert set(feature_columns(6)) - set(feature_columns(6, "plain")) == {*RELATIONS,
+    assert set(feature_columns(6, "relations")) - set(feature_columns(6, "plain")) == {*RELATIONS,
                                                                           "support_wanted_rbf"}
     agent = Agent(hidden=8, dtype="float64")                     # the defaults: plain features
     assert agent.features(obs).shape == plain.shape and agent.act(obs).shape == (3, 3)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from taskexp_lib import nn
-from taskexp_lib.exercises.checks import numerical_grad  # central differences, step 1e-6
+from taskexp_lib.exercises.grader import numerical_grad  # central differences, step 1e-6
 from taskexp_lib.nets import AttentionNet
 from taskexp_lib.nn import LayerNorm, SelfAttention, softmax
 

@@ -76,8 +76,12 @@ def test_installed_console_script_prints_its_help(fresh, tmp_path):
 
 def test_the_wheel_installs_only_the_three_modules_and_the_project_package(tmp_path):
     """No generic top-level name (config, cli, exercises ...) that another package could shadow."""
+    # from a copy: a build/ folder left in the checkout by an earlier build could add stale files
+    src = tmp_path / "src"
+    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
+        ".*", "build", "*.egg-info", "runs", "release", "__pycache__", "notebooks", "docs"))
     res = subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w",
-                          str(tmp_path), ROOT], capture_output=True, text=True)
+                          str(tmp_path), str(src)], capture_output=True, text=True)
     assert res.returncode == 0, res.stdout + res.stderr
     (wheel,) = tmp_path.glob("taskexp-*.whl")
     with zipfile.ZipFile(wheel) as z:
