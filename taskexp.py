@@ -305,8 +305,10 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
             relabelled = pieces.relabel(joined, env)
             if relabelled is not None:
                 demos.append(relabelled)
+    # picks_reached: the share of equation (1)'s picks that the policy reaches from s_T, the
+    # leading indicator of whether V(s, g) tells a reachable goal from an unreachable one
     info = dict(attempts=len(batch), successful=len(found), joined=n_joined,
-                relabelled=len(demos) - n_joined)
+                relabelled=len(demos) - n_joined, picks_reached=n_joined / max(len(found), 1))
     return demos, info
 
 
@@ -437,7 +439,8 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
     stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
     unusable = info["successful"] - info["joined"] - info["relabelled"]
     log(f"  {info['attempts']} attempts, {info['successful']} successful: {info['joined']} joined, "
-        f"{info['relabelled']} relabelled, {unusable} unusable; "
+        f"{info['relabelled']} relabelled, {unusable} unusable "
+        f"({info['picks_reached']:.0%} of the picks reached); "
         f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
     record = dict(expansion=info)
     if demos:

@@ -58,9 +58,17 @@ def success(run, k, shape=None):
     return 100 * (ev[shape] if shape else np.mean(list(ev.values())))
 
 
+def picks_reached(rows):
+    """The share (%) of equation (1)'s picks that verification reached, mean +- std over seeds,
+    or a dash for a round without task expansion (or a run older than the measurement)."""
+    shares = [w.get("expansion", {}).get("picks_reached") for w in rows]
+    return "-" if None in shares else pm([100 * s for s in shares], "%")
+
+
 def table1(runs, rounds):
     out = ["| round | generated tasks | # high goals (>= 3 above ground) | paper | mean episode "
-           "length | paper | mean highest goal layer |", "|---|---|---|---|---|---|---|"]
+           "length | paper | mean highest goal layer | eq. (1) picks reached |",
+           "|---|---|---|---|---|---|---|---|"]
     for k in range(rounds + 1):
         rows = [r["rounds"][k] for r in runs]
         out.append(f"| {k}{' (base)' if k == 0 else ''} | {pm([w['tasks'] for w in rows])} | "
@@ -68,7 +76,8 @@ def table1(runs, rounds):
                    f"{paper(PAPER_T1['high_goal_tasks'], k, 0, '')} | "
                    f"{pm([w['mean_episode_length'] for w in rows], '', 2)} | "
                    f"{paper(PAPER_T1['mean_episode_length'], k, 1, '')} | "
-                   f"{pm([mean_layer(w['max_height_hist']) for w in rows], '', 2)} |")
+                   f"{pm([mean_layer(w['max_height_hist']) for w in rows], '', 2)} | "
+                   f"{picks_reached(rows)} |")
     return out
 
 
@@ -85,12 +94,13 @@ def table2(runs, rounds, shapes, with_paper=True):
 
 
 def table3(by_variant, k, shapes):
-    out = [f"| after round {k} |" + "".join(f" {s} | paper |" for s in shapes) + " mean |",
-           "|---" * (2 + 2 * len(shapes)) + "|"]
+    out = [f"| after round {k} |" + "".join(f" {s} | paper |" for s in shapes)
+           + " mean | eq. (1) picks reached |", "|---" * (3 + 2 * len(shapes)) + "|"]
     for v, runs in by_variant.items():
         cells = "".join(f" {pm([success(r, k, s) for r in runs], '%')} | "
                         f"{PAPER_T3[v][i]:.1f}% |" for i, s in enumerate(shapes))
-        out.append(f"| {NAMES[v]} |{cells} {pm([success(r, k) for r in runs], '%')} |")
+        out.append(f"| {NAMES[v]} |{cells} {pm([success(r, k) for r in runs], '%')} | "
+                   f"{picks_reached([r['rounds'][k] for r in runs])} |")
     return out
 
 

@@ -27,10 +27,12 @@ def tables(results):
     """Table 1 (generated tasks per round) and Table 2 (zero-shot success) as markdown."""
     rounds = results["rounds"]
     shapes = list(rounds[0]["eval"])
-    t1 = ["| round | generated tasks | # high goals (>= 3 above ground) | mean episode length |",
-          "|---|---|---|---|"]
+    t1 = ["| round | generated tasks | # high goals (>= 3 above ground) | mean episode length "
+          "| eq. (1) picks reached |", "|---|---|---|---|---|"]
+    reached = lambda r: (f"{r['expansion']['picks_reached']:.0%}"
+                         if "picks_reached" in r.get("expansion", {}) else "")
     t1 += [f"| {r['round']} | {r['tasks']} | {r['high_goal_tasks']} | "
-           f"{r['mean_episode_length']:.2f} |" for r in rounds if "tasks" in r]
+           f"{r['mean_episode_length']:.2f} | {reached(r)} |" for r in rounds if "tasks" in r]
     t2 = ["| round | " + " | ".join(shapes) + " |", "|---" * (len(shapes) + 1) + "|"]
     t2 += [f"| {r['round']} | " + " | ".join(f"{100 * r['eval'][s]:.0f}%" for s in shapes) + " |"
            for r in rounds]

@@ -115,8 +115,10 @@ def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
     for k in (0, 1):
         agent = Agent.load(os.path.join(out, f"round{k}.npz"))
         assert agent.act(np.zeros((6, 6), np.float32)).shape == (3,)
+    expansion = res["rounds"][1]["expansion"]          # the leading indicator of equation (1)
+    assert expansion["picks_reached"] == expansion["joined"] / expansion["successful"]
     printed = capsys.readouterr().out
-    assert "Table 1" in printed and "Table 2" in printed
+    assert "Table 1" in printed and "Table 2" in printed and "picks reached" in printed
     assert os.path.exists(os.path.join(out, "fig1_max_goal_height.png"))
 
 
