@@ -329,6 +329,8 @@ class Agent:
                              critic_gradient_norm=norm_critic)
                 self.actor_opt.step(g_actor)
                 self.critic_opt.step(g_critic)
+                # the loss returns (L, dL/dout) only, as exercise 4 asks: the logged figures
+                # come from the distribution again (a few element-wise operations)
                 l_clip, entropy, kl, clipped = ppo_stats(self.action_dist(out, self.n_x),
                                                          actions[idx], logp_old[idx], adv[idx],
                                                          clip)

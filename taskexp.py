@@ -14,7 +14,7 @@
 A task is a pair (s0, goals): a state array (n_blocks, 6) and a dict {block: (x, y)}.
 The hyperparameters are in taskexp_lib/config.py, the batched episodes in taskexp_lib/rollout.py;
 the plumbing (arguments, run directory, checkpoints, resume, progress, tables and figures) in
-taskexp_lib/cli.py. `python taskexp.py --rounds 3` runs cli.main().
+taskexp_lib/cli.py. `python taskexp.py --rounds 3` runs taskexp_lib.cli.main().
 """
 # `python taskexp.py` hands over to the CLI, which imports this file as taskexp: so the method is
 # defined once, rather than once more as __main__.
@@ -31,16 +31,19 @@ from tqdm import tqdm
 
 import agent as agent_lib
 from agent import Agent
+from env2d import drop_height
 from taskexp_lib import one_blas_thread
 from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Config, a run's settings)
-from taskexp_lib.geometry import BLOCK_W, N_X, is_success, layer, observation, on_same_spot
+from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, observation, on_same_spot
+from taskexp_lib.nn import mlp_backward
 from taskexp_lib.report import task_stats
 from taskexp_lib.rollout import Trajectory, Worlds, physics_pool, run_episodes, success_rate
+from taskexp_lib.shapes import eval_tasks
 
 
 @contextmanager
 def phase(where):
-    """Prefix a FloatingPointError raised by training (agent.check_finite) with where in the run."""
+    """Prefix a FloatingPointError raised by training (nn.check_finite) with where in the run."""
     try:
         yield
     except FloatingPointError as e:
@@ -59,16 +62,22 @@ def on_table(state, env):
 # sec 4.1: base skills -- one block moved, plus "stay where you are" goals for others
 # --------------------------------------------------------------------------------------------
 
-def random_move(env, rng):
+def random_move(env, rng, free_table=False):
     """A random single-block action: onto the table, or onto another block (offset by at most
-    a quarter block, plus the rounding to the x grid).
+    a quarter block, plus the rounding to the x grid). free_table: the table moves land on free
+    table spots only (a block dropped at any x mostly lands on another block).
 
     Returns (block, action), or None when the drawn target is not a layer of the grid.
     """
     state, n = env.get_state(), env.n_blocks
     b = int(rng.integers(n))
     if rng.random() < 0.5:                                   # somewhere on the table
-        return b, env.encode_action(b, env.x_bins[rng.integers(len(env.x_bins))], env.y_bins[0])
+        xs = env.x_bins
+        if free_table:                                       # where a drop lands on the table
+            others = np.delete(state, b, axis=0)
+            xs = [x for x in xs if drop_height(x, others) < BLOCK_H]
+        return (b, env.encode_action(b, xs[rng.integers(len(xs))], env.y_bins[0])) if len(xs) \
+            else None
     j = int(rng.choice([i for i in range(n) if i != b]))     # on top of block j
     k = layer(state[j, 1]) + 1
     if not 1 <= k < n:                                       # j is above the top layer or fell off
@@ -97,7 +106,7 @@ def base_demos(cfg, env, rng, count, bar=silent):
                 s0 = env.get_state()
                 if not on_table(s0, env):                    # a block fell off: a new scene
                     break
-                move = random_move(env, rng)
+                move = random_move(env, rng, cfg.free_table)
                 if move is None:
                     continue
                 b, a = move
@@ -205,7 +214,7 @@ def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print
 
 def random_position(env, rng, others=()):
     """A goal position drawn uniformly over the action grid (any x-bin, any layer) among those
-    that are not the same spot as one of the positions `others` (env2d.same_spot: no two blocks
+    that are not the same spot as one of the positions `others` (geometry.same_spot: no two blocks
     can meet both)."""
     while True:
         ix, k = int(rng.integers(len(env.x_bins))), int(rng.integers(len(env.y_bins)))
@@ -355,51 +364,6 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
 # sec 5: zero-shot evaluation on held-out shapes, and the direct-PPO baseline
 # --------------------------------------------------------------------------------------------
 
-# Held-out shapes: (offset from the centre in block widths, layer). None of them can occur among
-# the base tasks (at most 3 goals, at most one block moved), and each has >= 4 goals with >= 3
-# above the ground. Drawings are in the README.
-SHAPES = {
-    "I": [(0, 0), (0, 1), (0, 2), (0, 3)],                         # a tower of four
-    "Y": [(-0.75, 0), (0.75, 0), (0, 1), (0, 2), (0, 3)],          # upside down: stem on two legs
-    "3T": [(-1, 0), (0, 0), (1, 0), (-0.5, 1), (0.5, 1), (0, 2)],  # three tiers, 3-2-1
-}
-
-
-def shape_goals(name, env, rng):
-    """Goals for a held-out shape at a random place, with randomly assigned blocks.
-
-    Returns {block: (x, y)}; the shape's centre lies on the x grid so every goal is reachable.
-    """
-    cells = SHAPES[name]
-    if len(cells) > env.n_blocks:
-        raise ValueError(f"shape {name!r} needs {len(cells)} blocks, the world has {env.n_blocks}")
-    reach = max(abs(dx) for dx, _ in cells) * BLOCK_W
-    x = env.x_bins
-    fits = (x - reach >= x[0] - 1e-9) & (x + reach <= x[-1] + 1e-9)
-    cx = x[fits][rng.integers(fits.sum())]
-    blocks = rng.permutation(env.n_blocks)[: len(cells)]
-    return {int(b): (float(cx + dx * BLOCK_W), float(env.y_bins[k]))
-            for b, (dx, k) in zip(blocks, cells)}
-
-
-def start_state(env, goals, rng):
-    """A random scattered scene for these goals (the env keeps goal footprints clear)."""
-    env.reset(seed=int(rng.integers(2**31)), options={"goals": goals})
-    return env.get_state()
-
-
-def eval_tasks(cfg, env):
-    """Fixed evaluation tasks per shape: the same scenes after every round (own Generator)."""
-    rng = np.random.default_rng([cfg.seed, cfg.eval_salt])
-    out = {}
-    for name in cfg.shapes:
-        out[name] = []
-        for _ in range(cfg.eval_episodes):
-            goals = shape_goals(name, env, rng)
-            out[name].append((start_state(env, goals, rng), goals))
-    return out
-
-
 def evaluate(agent, tasks_by_shape, envs):
     """Zero-shot success per shape with the greedy policy: {shape: rate}."""
     return {name: success_rate(run_episodes(agent, tasks, envs, deterministic=True))
@@ -422,8 +386,10 @@ def direct_ppo(agent, evals, cfg, envs, short_envs, rng, pieces, bar=silent):
 @dataclass
 class Pieces:
     """The parts of the method that the course's exercises ask a student to write. train() uses
-    these; exercise 7 passes the student's mlp_backward, gae and ppo_loss instead."""
-    mlp_backward: Callable = agent_lib.mlp_backward
+    these; exercise 7 passes the student's mlp_backward, gae and ppo_loss instead. alter and
+    select_goal are called with the library's extra arguments too (restrict, p_add; the mode of
+    the Table 3 ablations), which a student's version from exercises 5 and 6 does not take."""
+    mlp_backward: Callable = mlp_backward
     gae: Callable = agent_lib.gae
     ppo_loss: Callable = agent_lib.ppo_loss
     alter: Callable = alter
@@ -450,7 +416,7 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
     return {**record, **stats}
 
 
-def make_agent(cfg, mlp_backward=agent_lib.mlp_backward):
+def make_agent(cfg, mlp_backward=mlp_backward):
     """The untrained agent of a run with settings cfg (its network, features and action heads)."""
     return Agent(cfg.n_blocks, n_x=N_X, n_y=1 if cfg.action == "drop" else cfg.n_blocks,
                  hidden=cfg.hidden, seed=cfg.seed, mlp_backward=mlp_backward, dtype=cfg.dtype,

@@ -26,7 +26,7 @@ import numpy as np
 import agent
 import env2d
 import taskexp
-from taskexp_lib import cli, nn
+from taskexp_lib import cli, nn, one_blas_thread
 from taskexp_lib.config import Config
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -125,7 +125,8 @@ def main():
     p.add_argument("--skip-full", action="store_true", help="skip the timed default run")
     a = p.parse_args()
     cfg, workers = Config(), cli.usable_cores()
-    print(f"config: the defaults of config.Config (networks in {cfg.dtype}); {workers} cores")
+    print(f"config: the defaults of taskexp_lib.config.Config (networks in {cfg.dtype}); "
+          f"{workers} cores")
     with tempfile.TemporaryDirectory() as tmp:
         if not a.skip_full:
             total, per_round = timed_run(cfg, workers, os.path.join(tmp, "full"))
@@ -152,4 +153,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    with one_blas_thread():                 # as in a run
+        main()

@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 import taskexp
 from agent import Agent
 from env2d import BlockWorld
+from taskexp_lib import one_blas_thread, shapes
 from taskexp_lib.draw import draw_scene
 from taskexp_lib.geometry import is_success
 
@@ -28,11 +29,11 @@ def main():
     agent = Agent.load(a.agent) if a.agent else None
     env = BlockWorld(6, drop=agent is not None and taskexp.drops(agent))
     rng = np.random.default_rng(a.seed)
-    names = list(taskexp.SHAPES)
+    names = list(shapes.SHAPES)
     fig = Figure(figsize=(4.2 * len(names), 4.6))
     for col, name in enumerate(names):
-        goals = taskexp.shape_goals(name, env, rng)
-        s0 = taskexp.start_state(env, goals, rng)
+        goals = shapes.shape_goals(name, env, rng)
+        s0 = shapes.start_state(env, goals, rng)
         draw_scene(fig.add_subplot(2, len(names), col + 1), s0, goals,
                    title=f'"{name}": start and goals')
         if agent:
@@ -53,4 +54,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    with one_blas_thread():
+        main()

@@ -5,9 +5,10 @@
 
 Runs the checkpoint's policy on fresh base tasks (sec 4.1), and for every success s0 -> sT draws K
 one-alteration candidates and picks g* by equation (1), as task_expansion does. A candidate is
-called *feasible* when every goal not yet met at sT has its support in place (agent.relations:
+called *feasible* when every goal not yet met at sT has its support in place (features.relations:
 nothing in its spot, and the table or a block right under it), so one drop can meet it. The
-hand-computed relations only judge here; the agent may never have seen them. Prints the share of
+hand-computed relations (taskexp_lib.features.relations) only judge here; the agent may never
+have seen them. Prints the share of
 feasible goals among all candidates and among the chosen ones, and how often the verification
 run from sT (cfg.short_steps actions) reaches g*, for feasible and infeasible picks.
 """
@@ -20,6 +21,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import taskexp  # noqa: E402
 from agent import Agent  # noqa: E402
+from taskexp_lib import one_blas_thread  # noqa: E402
 from taskexp_lib.features import relations  # noqa: E402
 from taskexp_lib.geometry import THRESHOLD, is_success, observation  # noqa: E402
 from taskexp_lib.rollout import Worlds, run_episodes  # noqa: E402
@@ -54,7 +56,7 @@ def main():
         cands = [taskexp.alter(t.goals, envs[0], rng, cfg.restrict, cfg.p_add)
                  for _ in range(cfg.candidates)]
         cands = [g for g in cands if not is_success(sT, g)] or cands
-        i, _ = taskexp.select_goal(agent, t.states[0], sT, cands, cfg.select)
+        i = taskexp.select_goal(agent, t.states[0], sT, cands, cfg.select)
         ok = [feasible(sT, g) for g in cands]
         share.append(np.mean(ok))
         chosen.append((cands[i], ok[i]))
@@ -69,4 +71,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    with one_blas_thread():
+        main()

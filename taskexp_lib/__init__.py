@@ -13,7 +13,10 @@ the agent (agent.py): what those three are built from, and the plumbing around t
   cli.py         the command line: flags, the run directory, --resume, progress bars
   stress.py      stress actions for the physics tests and benchmarks
   exercises/     the graded problem set: a grader and one file per exercise
+
+and one_blas_thread(), the one setting a run makes for the whole process.
 """
+import numpy  # noqa: F401  (loads BLAS first: threadpoolctl limits only libraries already loaded)
 from threadpoolctl import threadpool_limits
 
 

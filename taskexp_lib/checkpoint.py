@@ -1,5 +1,5 @@
-"""taskexp_lib/checkpoint.py -- every file a run reads or writes: agent checkpoints (round{k}.npz),
-the resume state (state.npz) and results.json.
+"""taskexp_lib/checkpoint.py -- the files a run is resumed from, loaded from or compared by: agent
+checkpoints (round{k}.npz), the resume state (state.npz) and results.json.
 
 Plain .npz files, never pickle. Every write is atomic (a temporary file, then a rename), so a run
 killed mid-write leaves the previous file intact, and byte-identical for identical arrays, so two

@@ -22,13 +22,14 @@ import numpy as np
 from tqdm import tqdm
 
 import taskexp
-from taskexp import SHAPES, RunState
+from taskexp import RunState
 
 from . import report
 from .checkpoint import load_state, save_json, save_state, saved_results
 from .config import Config
 from .features import FEATURES
 from .nets import NETWORKS
+from .shapes import SHAPES
 
 # --------------------------------------------------------------------------------------------
 # Flags: one per Config field, its help text the field's docstring
@@ -225,7 +226,7 @@ def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar, workers=1):
     t_start = time.time() - clock.get("total_s", 0.0)
     t_round = [time.time()]
 
-    def checkpoint(k, agent, run, rng):
+    def after_round(k, agent, run, rng):
         clock = run.results["wallclock"]
         clock[f"round{k}_s"] = round(time.time() - t_round[0], 1)
         clock["total_s"] = round(time.time() - t_start, 1)
@@ -238,7 +239,7 @@ def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar, workers=1):
             + f"  ({clock['total_s']:.0f}s so far, peak memory {clock['peak_memory_mb']} MB)")
         t_round[0] = time.time()
 
-    return taskexp.train(cfg, agent, state, rng, on_round=checkpoint, bar=bar, log=log,
+    return taskexp.train(cfg, agent, state, rng, on_round=after_round, bar=bar, log=log,
                          workers=workers).results
 
 

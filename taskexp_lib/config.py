@@ -28,7 +28,7 @@ class Config:
     blocks see each other only through pooled summaries)"""
     features: str = "plain"
     """sec 3: plain (each block's pose and goal) | relations (plus stacking preconditions
-    computed by hand, agent.RELATIONS: what the network would otherwise have to learn)"""
+    computed by hand, features.RELATIONS: what the network would otherwise have to learn)"""
     action: str = "drop"
     """sec 3: drop (pick a block and an x; it falls onto whatever lies there, so physics finds
     its height) | place (pick a layer too: a layer the demos never showed is never chosen)"""
@@ -44,6 +44,10 @@ class Config:
     """sec 4.1: a scene takes warmup + 1 random moves, each a demo if usable, so demos come after
     0..warmup earlier moves and see stacks of every height; the paper's demos come from
     scattered scenes (warmup = 0)"""
+    free_table: bool = False
+    """sec 4.1: the base demos' "onto the table" moves land on free table spots, as in the
+    authors' environment, so that about half of the single-block goals sit on another block
+    (off: any x, and in the world that drops most such moves land on a block)"""
     max_stay: int = 2
     """sec 4.1: up to this many "stay where you are" goals for other blocks in a base task"""
     bc_epochs: int = 8

@@ -13,7 +13,7 @@ from .nn import MLP, LayerNorm, SelfAttention, mlp_backward
 
 
 class AttentionNet:
-    """Transformer encoder over block tokens, with the interface of agent.SetNet.
+    """Transformer encoder over block tokens, with the interface of SetNet (below).
 
         x_i = phi(f_i)                 phi = MLP([F, H, H])   (tanh hidden, linear out)
         for each layer l:
@@ -29,7 +29,7 @@ class AttentionNet:
     (The authors' encoder, policies/attention_discrete.py, is post-LN: x = LN(x + Attn(x)),
     then x = LN(FFN(x)) with no residual around the FFN; their critic mean-pools the token
     features before an MLP, where here, as with SetNet, per-token values are mean-pooled.)
-    tanh in the FFN (the authors use ReLU): it is agent.MLP, whose backward is already checked,
+    tanh in the FFN (the authors use ReLU): it is nn.MLP, whose backward is already checked,
     it is smooth, so finite-difference checks have no kinks to straddle, and LN in front keeps
     its inputs O(1), away from saturation.
 

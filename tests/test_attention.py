@@ -1,6 +1,6 @@
 """Tests of agent.py's self-attention network: every backward against central finite differences
 (float64), that the comparison catches the classic attention-backward mistakes, permutation
-equivariance, attention rows summing to 1, float32, and use as a drop-in for agent.SetNet."""
+equivariance, attention rows summing to 1, float32, and use as a drop-in for nets.SetNet."""
 import numpy as np
 import pytest
 

@@ -27,7 +27,7 @@ from taskexp_lib import nn
 from taskexp_lib.geometry import is_success
 
 R = exercises.REFERENCE
-ROOT = exercises.kit.ROOT                                                   # the repository
+ROOT = exercises.kit.REPOSITORY                                                   # the repository
 SIMPLE = ["ex1", "ex2", "ex3", "ex4", "ex5", "ex6", "ex8"]   # all but the behavioural ex7
 
 

@@ -24,7 +24,7 @@ import taskexp_lib.exercises as exercises
 import taskexp_lib.exercises.kit as kit
 from taskexp_lib.exercises import vectors
 
-ROOT = kit.ROOT
+ROOT = kit.REPOSITORY
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import pytest
 import taskexp
 from agent import Agent
 from env2d import BlockWorld
-from taskexp_lib import cli
+from taskexp_lib import cli, shapes
 from taskexp_lib.geometry import BLOCK_H, is_success, layer, same_spot
 
 
@@ -61,6 +61,20 @@ class FixedValues:
         return self.v[which]
 
 
+def test_free_table_puts_about_half_the_base_goals_on_a_block():
+    """sec 4.1 as the authors built it: "onto the table" moves land on free table spots, so in
+    the world that drops about half of the moved blocks' goals lie on another block (without
+    free_table, most table moves land on a block)."""
+    env = BlockWorld(6, drop=True)
+    on_block = {}
+    for free in (False, True):
+        cfg = taskexp.Config(free_table=free)
+        tasks, _, _ = taskexp.base_demos(cfg, env, np.random.default_rng(0), 300)
+        moved = [next(iter(goals.values())) for _, goals in tasks]    # the moved block comes first
+        on_block[free] = np.mean([layer(y) >= 1 for _, y in moved])
+    assert 0.35 < on_block[True] < 0.65 and on_block[False] > 0.7, on_block
+
+
 def test_select_goal_equation_1_and_ablations():
     s0, sT = np.zeros((6, 6)), np.ones((6, 6))
     cands = [{1: (0.0, 0.025)}] * 3
@@ -86,11 +100,11 @@ def test_relabel_uses_reached_positions(env):
     assert taskexp.relabel(traj, env) is None        # block 0 never moved: nothing achieved
 
 
-@pytest.mark.parametrize("name", list(taskexp.SHAPES))
+@pytest.mark.parametrize("name", list(shapes.SHAPES))
 def test_shapes_are_held_out_and_buildable(env, name):
     rng = np.random.default_rng(2)
     for _ in range(5):
-        goals = taskexp.shape_goals(name, env, rng)
+        goals = shapes.shape_goals(name, env, rng)
         high = [b for b, (_, y) in goals.items() if layer(y) >= 1]
         assert len(goals) >= 4 and len(high) >= 3
         obs, _ = env.reset(seed=int(rng.integers(1000)), options={"goals": goals})

@@ -1,4 +1,5 @@
-"""exercises/__main__.py -- the command line: check a notebook or a folder, write the kit.
+"""taskexp_lib/exercises/__main__.py -- the command line: check a notebook or a folder, write the
+kit.
 
     python -m taskexp_lib.exercises ex3 NOTEBOOK   # exec the notebook's solution cells, check_ex3
     python -m taskexp_lib.exercises all FOLDER     # every exercise, the total; exit 1 if one fails
@@ -8,6 +9,7 @@
 import os
 import sys
 
+from .. import one_blas_thread
 from .checks import CHECKS
 from .grader import passes
 from .kit import course, release
@@ -73,4 +75,5 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    with one_blas_thread():          # the checks and the recorded cases, as in a run
+        sys.exit(main())

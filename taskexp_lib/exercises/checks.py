@@ -1,5 +1,5 @@
-"""exercises/checks.py -- the check of each exercise, by its name: what a notebook's graded cell,
-the command line and the kit's recording of cases run."""
+"""taskexp_lib/exercises/checks.py -- the check of each exercise, by its name: what a notebook's
+graded cell, the command line and the kit's recording of cases run."""
 from .ex1 import check_ex1
 from .ex2 import check_ex2
 from .ex3 import check_ex3

@@ -1,4 +1,4 @@
-"""exercises/dist.py -- the policy distribution built from a student's exercise 2.
+"""taskexp_lib/exercises/dist.py -- the policy distribution built from a student's exercise 2.
 
 agent.ActionDist is the reference solution of exercise 2, so a student kit has it as stubs: there
 the distribution that exercise 4's ppo_loss uses and that exercise 7 trains with is the student's

@@ -1,4 +1,5 @@
-"""exercises/ex1.py -- exercise 1: the backward pass of an MLP (taskexp_lib.nn.mlp_backward).
+"""taskexp_lib/exercises/ex1.py -- exercise 1: the backward pass of an MLP
+(taskexp_lib.nn.mlp_backward).
 
 The student writes mlp_backward(params, hs, dout) -> (grads, dx) for tanh hidden layers and a
 linear output. The check compares it with the reference on one to four layers, one sample and

@@ -1,5 +1,5 @@
-"""exercises/ex2.py -- exercise 2: the log-probability and entropy of the policy pi(b, x, y), and
-their gradient (agent.ActionDist).
+"""taskexp_lib/exercises/ex2.py -- exercise 2: the log-probability and entropy of the policy pi(b,
+x, y), and their gradient (agent.ActionDist).
 
 The student writes logp_entropy(out, actions, n_x) -> (logp, H), logp_entropy_backward(out,
 actions, n_x, a, c) -> dout and log_softmax(z). The library has them as the methods of

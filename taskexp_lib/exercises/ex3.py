@@ -1,4 +1,4 @@
-"""exercises/ex3.py -- exercise 3: generalised advantage estimation (agent.gae).
+"""taskexp_lib/exercises/ex3.py -- exercise 3: generalised advantage estimation (agent.gae).
 
 The student writes gae(rewards, values, terminated, truncated, next_values, gamma, lam) ->
 (advantages, returns). The check compares it with the reference on episodes with and without

@@ -1,4 +1,5 @@
-"""exercises/ex4.py -- exercise 4: PPO's clipped surrogate and its gradient (agent.ppo_loss).
+"""taskexp_lib/exercises/ex4.py -- exercise 4: PPO's clipped surrogate and its gradient
+(agent.ppo_loss).
 
 The student writes ppo_loss(out, actions, logp_old, adv, n_x, clip, ent_coef) -> (L, dL/dout),
 with the policy distribution of their exercise 2 (exercises.action_dist()). The check compares it

@@ -1,4 +1,5 @@
-"""exercises/ex5.py -- exercise 5: one-alteration task sampling (taskexp.alter, sec 4.2).
+"""taskexp_lib/exercises/ex5.py -- exercise 5: one-alteration task sampling (taskexp.alter, sec
+4.2).
 
 The student writes alter(goals, env, rng) -> a new goal dict: exactly one goal added for a free
 block, or one goal modified. alter is random, so the check samples it: each sample must follow

@@ -1,5 +1,5 @@
-"""exercises/ex6.py -- exercise 6: goal selection by equation (1) (taskexp.select_goal) and
-hindsight relabelling on failure (taskexp.relabel).
+"""taskexp_lib/exercises/ex6.py -- exercise 6: goal selection by equation (1) (taskexp.select_goal)
+and hindsight relabelling on failure (taskexp.relabel).
 
 The student writes select_goal(agent, s0, sT, candidates) -> the index of g*, checked with a
 stand-in critic (DistanceCritic) whose values are known, and relabel(traj, env) -> Trajectory or

@@ -1,6 +1,6 @@
-"""exercises/ex7.py -- exercise 7, behavioural: the student's mlp_backward, policy distribution
-(exercise 2), gae and ppo_loss, passed to the library's training code, must train the base policy
-(sec 4.1) past a measured bar within a fixed budget.
+"""taskexp_lib/exercises/ex7.py -- exercise 7, behavioural: the student's mlp_backward, policy
+distribution (exercise 2), gae and ppo_loss, passed to the library's training code, must train the
+base policy (sec 4.1) past a measured bar within a fixed budget.
 
 BC alone would already solve many base tasks, and then a broken PPO could pass.  So BC is kept weak
 on purpose (3000 demos, 8 epochs: 14-17% greedy success on 200 held-out base tasks), and the check

@@ -1,5 +1,5 @@
-"""exercises/ex8.py -- exercise 8: the backward pass of one self-attention layer over block tokens
-(taskexp_lib.nn.SelfAttention).
+"""taskexp_lib/exercises/ex8.py -- exercise 8: the backward pass of one self-attention layer over
+block tokens (taskexp_lib.nn.SelfAttention).
 
 The student writes attention_backward(params, cache, dout) -> (grads, dx), where cache is what
 SelfAttention.forward keeps. The check compares it with the reference (SelfAttention.backward, run

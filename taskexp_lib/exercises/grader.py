@@ -1,5 +1,5 @@
-"""exercises/grader.py -- what every check is made of: a report of its cases, the calls of a
-student's functions, the comparisons, and the stand-in world of exercises 5 and 6.
+"""taskexp_lib/exercises/grader.py -- what every check is made of: a report of its cases, the calls
+of a student's functions, the comparisons, and the stand-in world of exercises 5 and 6.
 
 A check (exN.py) runs the student's functions on fixed cases of varied shapes plus edge cases
 and compares them with the reference solution. It prints one PASS line and returns None, or
@@ -25,7 +25,7 @@ from ..geometry import TABLE_X, THRESHOLD, X_BINS, layer_y
 
 def tiny_env(n_blocks):
     """What ex5/ex6 may use of a BlockWorld: n_blocks, x_bins (37,), y_bins (n_blocks,), table_x,
-    threshold; all from env2d's geometry."""
+    threshold; all from taskexp_lib/geometry.py."""
     return SimpleNamespace(n_blocks=n_blocks, x_bins=X_BINS.copy(),
                            y_bins=layer_y(np.arange(n_blocks)),
                            table_x=TABLE_X, threshold=THRESHOLD)

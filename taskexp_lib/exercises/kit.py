@@ -1,4 +1,4 @@
-"""exercises/kit.py -- the student kit, and the nbgrader course that makes the same kit.
+"""taskexp_lib/exercises/kit.py -- the student kit, and the nbgrader course that makes the same kit.
 
     python -m taskexp_lib.exercises release OUT   the student kit: hand OUT to students
     python -m taskexp_lib.exercises course DIR    an nbgrader course (its nbgrader_config.py:
@@ -23,11 +23,9 @@ import numpy as np
 
 from . import vectors
 from .checks import CHECKS
-from .notebooks import NOTEBOOK_DIR, write_notebooks
+from .notebooks import NOTEBOOK_DIR, PACKAGE, REPOSITORY, write_notebooks
 from .problems import FUNCTIONS, NOTEBOOKS, POINTS
 
-PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))   # taskexp_lib
-ROOT = os.path.dirname(PACKAGE)                                         # the repository
 # the modules the wheel installs (pyproject.toml), as dotted names
 LIBRARY = ["taskexp", "env2d", "agent"] + sorted(
     f"taskexp_lib.{os.path.basename(p)[:-3]}" for p in glob.glob(os.path.join(PACKAGE, "*.py")))
@@ -50,7 +48,7 @@ EXERCISED = {
 }
 
 
-def source_file(module, root=ROOT):
+def source_file(module, root=REPOSITORY):
     """The file of a library module named with dots (taskexp_lib.nn) in the folder `root`."""
     return os.path.join(root, *module.split(".")) + ".py"
 
@@ -166,8 +164,8 @@ def _target(out):
     """Refuse to write a kit over the repository, the instructor notebooks, or a folder that
     is neither empty nor an earlier kit."""
     real = os.path.realpath(out)
-    if real in (os.path.realpath(ROOT), os.path.realpath(NOTEBOOK_DIR)) or \
-            os.path.realpath(ROOT).startswith(real + os.sep):
+    if real in (os.path.realpath(REPOSITORY), os.path.realpath(NOTEBOOK_DIR)) or \
+            os.path.realpath(REPOSITORY).startswith(real + os.sep):
         raise ValueError(f"a kit in {out} would overwrite the repository's library or notebooks")
     if os.path.isdir(out) and os.listdir(out) and not os.path.exists(
             os.path.join(out, "taskexp_lib", "exercises", "vectors.json")):
@@ -194,7 +192,8 @@ def write_kit(out, student=True):
         json.dump(dict(about="the checks' cases: inputs and expected outputs, recorded from the "
                              "reference solutions by python -m taskexp_lib.exercises release",
                        numpy=np.__version__, cases=cases), f)
-    shutil.copyfile(os.path.join(ROOT, "requirements.txt"), os.path.join(out, "requirements.txt"))
+    shutil.copyfile(os.path.join(REPOSITORY, "requirements.txt"),
+                    os.path.join(out, "requirements.txt"))
     with open(os.path.join(out, "README.md"), "w") as f:
         f.write(README)
     leaks = answers_in(out) if student else []

@@ -1,7 +1,6 @@
-"""exercises/notebooks.py -- the notebooks: load a student's functions from theirs (and the
-ActionDist of their exercise 2), and write the student or instructor versions of ours. The
-notebooks follow nbgrader's conventions (cell metadata, solution markers).
-"""
+"""taskexp_lib/exercises/notebooks.py -- the notebooks: load a student's functions from theirs (and
+the ActionDist of their exercise 2), and write the student or instructor versions of ours. The
+notebooks follow nbgrader's conventions (cell metadata, solution markers)."""
 import glob
 import json
 import linecache
@@ -11,7 +10,8 @@ import re
 from .dist import student_action_dist
 from .problems import FUNCTIONS, NOTEBOOKS
 
-REPOSITORY = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))   # taskexp_lib
+REPOSITORY = os.path.dirname(PACKAGE)
 NOTEBOOK_DIR = os.path.join(REPOSITORY, "notebooks", "exercises")       # the instructor notebooks
 
 _loading = []         # the folders of the notebooks being loaded: action_dist() looks there

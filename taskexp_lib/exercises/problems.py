@@ -1,6 +1,6 @@
-"""exercises/problems.py -- the problem set as data: each exercise's notebook, the functions the
-student writes in it (in the order its check takes them), and its points (those of its graded
-cell; tests/test_exercises.py checks they agree)."""
+"""taskexp_lib/exercises/problems.py -- the problem set as data: each exercise's notebook, the
+functions the student writes in it (in the order its check takes them), and its points (those of its
+graded cell; tests/test_exercises.py checks they agree)."""
 
 NOTEBOOKS = {"ex1": "ex1_mlp_backward.ipynb", "ex2": "ex2_logprob_entropy.ipynb",
              "ex3": "ex3_gae.ipynb", "ex4": "ex4_ppo_loss.ipynb", "ex5": "ex5_alter.ipynb",

@@ -1,5 +1,5 @@
-"""exercises/reference.py -- the reference solution of every function a student writes: the
-library's own, called directly where its signature is the exercise's, or through the wrapper of
+"""taskexp_lib/exercises/reference.py -- the reference solution of every function a student writes:
+the library's own, called directly where its signature is the exercise's, or through the wrapper of
 its exercise (ex2.py, ex8.py) where the library has it as a method.
 
 Only the checks' make() functions call these, so that a student kit (whose library has stubs and

@@ -1,4 +1,5 @@
-"""exercises/vectors.py -- where a check's cases come from: the library, or recorded test vectors.
+"""taskexp_lib/exercises/vectors.py -- where a check's cases come from: the library, or recorded
+test vectors.
 
 A case is data: its inputs and the expected outputs, a dict made by a `make()` function of the
 check. In the repository, make() runs on the full library (the reference). A student kit has no
