@@ -155,6 +155,22 @@ def value_loss(out, returns):
     return 0.5 * np.mean((V - returns) ** 2), dout, V
 
 
+def pair_value_loss(out, returns, weight):
+    """Value loss on pairs of states under one goal: out (2B, n, 1) holds the states a, then the
+    states b; returns (B, 2) their targets. Equation (1) ranks by V(sT, g) - V(s0, g), so the
+    difference of each pair is regressed on the difference of its targets too:
+        L = mean 0.5 (V_a - R_a)^2 + 0.5 (V_b - R_b)^2 + weight 0.5 ((V_a - V_b) - (R_a - R_b))^2
+    -> (L, dL/d out (2B, n, 1), V (2B,))."""
+    B2, n, _ = out.shape
+    B = B2 // 2
+    V = out[..., 0].mean(-1)
+    ea, eb = V[:B] - returns[:, 0], V[B:] - returns[:, 1]
+    r = ea - eb                                      # (V_a - V_b) - (R_a - R_b)
+    loss = 0.5 * np.mean(ea ** 2) + 0.5 * np.mean(eb ** 2) + weight * 0.5 * np.mean(r ** 2)
+    dV = np.concatenate([ea + weight * r, eb - weight * r]) / B
+    return loss, np.broadcast_to((dV / n)[:, None, None], out.shape).copy(), V
+
+
 def gae(rewards, values, terminated, truncated, next_values, gamma, lam):
     """Generalised advantage estimation; all inputs (T, N) with time on axis 0.
 
@@ -265,15 +281,28 @@ class Agent:
         return self._fit("value fit", self.critic, self.critic_opt, value_loss, obs, returns,
                          epochs, batch_size, lr, rng, max_grad_norm)
 
+    def fit_value_pairs(self, obs, returns, weight, epochs, batch_size, lr, rng,
+                        max_grad_norm=None):
+        """Regress V on pairs of states under one goal, their difference too (pair_value_loss):
+        obs (N, 2, n, 6), returns (N, 2); a minibatch holds both states of each of its pairs.
+        -> list of the mean minibatch loss of each epoch."""
+        loss = lambda out, R: pair_value_loss(out, R, weight)
+        both = lambda o: np.concatenate([o[:, 0], o[:, 1]])          # the states a, then b
+        return self._fit("pair value fit", self.critic, self.critic_opt, loss, obs,
+                         np.asarray(returns, np.float64), epochs, batch_size, lr, rng,
+                         max_grad_norm, inputs=both)
+
     def _fit(self, phase, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng,
-             max_grad_norm):
+             max_grad_norm, inputs=lambda o: o):
         """Minibatch Adam on loss_fn(out, targets) -> (L, dL/dout, ...); features are computed
-        per minibatch, as (N, n, F) float64 for N = 100k would need ~300 MB."""
+        per minibatch, as (N, n, F) float64 for N = 100k would need ~300 MB. inputs(obs[idx])
+        gives the network's observations of a minibatch."""
         obs, opt.lr, losses = np.asarray(obs, dtype=np.float64), lr, []
         for e in range(epochs):
             epoch = []
             for i, idx in enumerate(_minibatches(len(obs), batch_size, rng)):
-                loss, dout = loss_fn(net.forward(self.features(obs[idx])), targets[idx])[:2]
+                out = net.forward(self.features(inputs(obs[idx])))
+                loss, dout = loss_fn(out, targets[idx])[:2]
                 grads, norm = clip_grad_norm(net.backward(dout), max_grad_norm)
                 check_finite(f"{phase} epoch {e + 1} minibatch {i + 1}", loss=loss,
                              gradient_norm=norm)

@@ -35,6 +35,7 @@ from env2d import drop_height
 from taskexp_lib import one_blas_thread
 from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Config, a run's settings)
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, observation, on_same_spot
+from taskexp_lib.labels import labelled
 from taskexp_lib.nn import mlp_backward
 from taskexp_lib.report import task_stats
 from taskexp_lib.rollout import Trajectory, Worlds, physics_pool, run_episodes, success_rate
@@ -204,8 +205,10 @@ def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print
     ppo_log = ppo_phase(agent, tasks, cfg, envs, short_envs, rng, "PPO base", pieces=pieces,
                         bar=bar)
     stats = task_stats([g for _, g in tasks], [1] * len(tasks), cfg.n_blocks)
-    return dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log], **stats), \
-        tasks, obs, actions
+    record = dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log], **stats)
+    if cfg.label_tasks:           # not in the paper: V(s, g) learns from labelled outcomes too
+        record.update(labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, bar, log))
+    return record, tasks, obs, actions
 
 
 # --------------------------------------------------------------------------------------------
@@ -357,7 +360,11 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
                         pieces=pieces, bar=bar)
     run.all_tasks = (run.all_tasks + new_tasks)[-cfg.buffer_size:]
     run.prev_tasks = new_tasks
-    return dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log])
+    record = dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log])
+    if cfg.label_tasks and cfg.label_every_round:
+        # the next task expansion asks V about one alteration of exactly these tasks
+        record.update(labelled(agent, new_tasks, cfg, envs, short_envs, rng, pieces, bar, log))
+    return record
 
 
 # --------------------------------------------------------------------------------------------

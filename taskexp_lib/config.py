@@ -96,6 +96,29 @@ class Config:
     restrict: bool = True
     """sec 4.2: one alteration; False draws unrelated random tasks (Table 3 "w/o restriction")"""
 
+    label_tasks: int = 0
+    """not in the paper: labelled outcomes as data for V(s, g) (taskexp_lib/labels.py), on this
+    many base tasks after the base PPO; 0 = off. The policy runs toward one-alteration candidates
+    from s_T and s_0 on the short budget, and V is regressed on the discounted outcomes"""
+    label_every_round: bool = False
+    """label_tasks: label after every round's self-distillation too, on the round's new tasks
+    (which the next task expansion starts from), not only after the base PPO"""
+    label_per: int = 4
+    """label_tasks: candidates labelled per successful trajectory"""
+    label_top: int = 2
+    """label_tasks: how many of them are those equation (1) ranks first (where the critic errs,
+    its argmax finds it); the rest are drawn at random"""
+    label_iters: int = 3
+    """label_tasks: rounds of label-then-fit, each on label_tasks / label_iters tasks and all the
+    labels so far, so that each labels the picks of the critic the last one left"""
+    label_epochs: int = 30
+    """label_tasks: epochs of the value regression, split over the label_iters rounds"""
+    label_lr: float = 1e-3
+    """label_tasks: Adam learning rate of the value regression"""
+    label_pair: float = 1.0
+    """label_tasks: the weight on the difference V(sT, g) - V(s0, g), the quantity equation (1)
+    ranks by, in a second fit on the labelled pairs (agent.pair_value_loss); 0 = no such fit"""
+
     buffer_size: int = 60000
     """sec 4.3: demo steps, and tasks, kept for self-distillation (oldest dropped): the memory
     bound of a long run"""

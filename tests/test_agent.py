@@ -3,7 +3,17 @@ plain reference, numerical stability, sampling, the Agent API, persistence, and 
 import numpy as np
 import pytest
 
-from agent import ActionDist, Agent, bc_loss, entropy_of, gae, log_softmax, ppo_loss, value_loss
+from agent import (
+    ActionDist,
+    Agent,
+    bc_loss,
+    entropy_of,
+    gae,
+    log_softmax,
+    pair_value_loss,
+    ppo_loss,
+    value_loss,
+)
 from taskexp_lib.exercises.grader import numerical_grad  # central differences, step 1e-6
 from taskexp_lib.features import RELATIONS, feature_columns, featurize, relations
 from taskexp_lib.geometry import GEOMETRY
@@ -117,6 +127,25 @@ def test_value_loss_backward():
     L, dout, V = value_loss(out, R)
     assert np.allclose(V, out[..., 0].mean(1)) and np.isclose(L, 0.5 * np.mean((V - R) ** 2))
     assert rel_err(dout, numerical_grad(lambda: value_loss(out, R)[0], out)) < TOL
+
+
+def test_pair_value_loss_backward():
+    rng = np.random.default_rng(6)
+    out, R = rng.standard_normal((6, 4, 1)), rng.random((3, 2))
+    L, dout, V = pair_value_loss(out, R, 0.7)
+    e = V.reshape(2, 3).T - R                                  # errors of the states a, b
+    want = 0.5 * np.mean(e ** 2) * 2 + 0.7 * 0.5 * np.mean((e[:, 0] - e[:, 1]) ** 2)
+    assert np.isclose(L, want)
+    assert rel_err(dout, numerical_grad(lambda: pair_value_loss(out, R, 0.7)[0], out)) < TOL
+
+
+def test_fit_value_pairs_fits_the_difference():
+    rng = np.random.default_rng(15)
+    agent = Agent(hidden=16, seed=0, n_y=6, **DEEP_SET)
+    obs = random_obs(rng, 64).reshape(32, 2, 6, 6)
+    target = obs[..., 5].sum(-1) * 0.3 + obs[..., 0, 0]          # (32, 2)
+    losses = agent.fit_value_pairs(obs, target, 1.0, epochs=30, batch_size=8, lr=3e-3, rng=rng)
+    assert losses[-1] < losses[0] / 10
 
 
 def test_agent_bc_gradient_through_features_and_setnet():

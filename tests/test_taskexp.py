@@ -9,8 +9,9 @@ import pytest
 import taskexp
 from agent import Agent
 from env2d import BlockWorld
-from taskexp_lib import cli, shapes
+from taskexp_lib import cli, labels, shapes
 from taskexp_lib.geometry import BLOCK_H, is_success, layer, same_spot
+from taskexp_lib.rollout import Trajectory
 
 
 @pytest.fixture
@@ -143,6 +144,31 @@ def test_same_seed_same_results_different_seed_different(tmp_path):
     files = [open(os.path.join(out, "round1.npz"), "rb").read() for out, _ in runs]
     assert strip[0] == strip[1] and files[0] == files[1]
     assert files[0] != files[2]
+
+
+def test_top_candidates_follow_equation_1_and_outcomes_are_discounted():
+    class GoalX:          # V(s, g) = block 1's goal x from s_T (block 0 at x = 1), 0 from s_0
+        def value(self, obs):
+            return obs[:, 1, 3] * obs[:, 0, 0]
+    s0, sT = np.zeros((6, 6)), np.ones((6, 6))
+    traj = Trajectory({}, np.stack([s0, sT]), np.zeros((1, 3), np.int64), True)
+    cands = [{1: (x, 0.025)} for x in (0.1, 0.3, -0.2, 0.2)]
+    assert labels.top_candidates(GoalX(), traj, cands, 3, taskexp.Pieces(), "ours") == [1, 3, 0]
+    three = Trajectory({}, np.zeros((4, 6, 6)), np.zeros((3, 3), np.int64), True)
+    assert np.allclose(labels.discounted_outcome(three, 0.9), [0.81, 0.9, 1.0])
+    three.success = False
+    assert not labels.discounted_outcome(three, 0.9).any()
+
+
+def test_labelled_outcomes_for_v_are_recorded_and_reproducible(tmp_path):
+    flags = ("--label-tasks", "24", "--label-iters", "2", "--label-epochs", "2",
+             "--label-every-round")
+    runs = [run_cli(tmp_path / name, *flags) for name in ("a", "b")]
+    rounds = runs[0][1]["rounds"]
+    assert rounds[0]["label_runs"] > 0 and len(rounds[0]["label_loss"]) == 1
+    assert 0 <= rounds[0]["label_success"] <= 1 and "label_runs" in rounds[1]
+    files = [open(os.path.join(out, "round1.npz"), "rb").read() for out, _ in runs]
+    assert files[0] == files[1]
 
 
 @pytest.mark.parametrize("flags, network, features, n_y", [
