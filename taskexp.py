@@ -77,8 +77,9 @@ def random_move(env, rng, free_table=False):
         if free_table:                                       # where a drop lands on the table
             others = np.delete(state, b, axis=0)
             xs = [x for x in xs if drop_height(x, others) < BLOCK_H]
-        return (b, env.encode_action(b, xs[rng.integers(len(xs))], env.y_bins[0])) if len(xs) \
-            else None
+        if not len(xs):                                      # the table is full
+            return None
+        return b, env.encode_action(b, xs[rng.integers(len(xs))], env.y_bins[0])
     j = int(rng.choice([i for i in range(n) if i != b]))     # on top of block j
     k = layer(state[j, 1]) + 1
     if not 1 <= k < n:                                       # j is above the top layer or fell off
