@@ -208,7 +208,8 @@ def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print
     stats = task_stats([g for _, g in tasks], [1] * len(tasks), cfg.n_blocks)
     record = dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log], **stats)
     if cfg.label_tasks:           # not in the paper: V(s, g) learns from labelled outcomes too
-        record.update(labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, bar, log))
+        record.update(labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar,
+                               log))
     return record, tasks, obs, actions
 
 
@@ -245,6 +246,13 @@ def alter(goals, env, rng, restrict=True, p_add=0.5):
     b = int(rng.choice(free)) if free and rng.random() < p_add else int(rng.choice(list(goals)))
     new[b] = random_position(env, rng, [xy for other, xy in goals.items() if other != b])
     return new
+
+
+def candidates(traj, env, rng, cfg, alter=alter):
+    """K = cfg.candidates one-alteration candidates for a successful trajectory s0 -> sT, less any
+    that already holds at sT: no new task, and equation (1) would favour it."""
+    cands = [alter(traj.goals, env, rng, cfg.restrict, cfg.p_add) for _ in range(cfg.candidates)]
+    return [g for g in cands if not is_success(traj.states[-1], g, env.threshold)] or cands
 
 
 def select_goal(agent, s0, sT, candidates, mode="ours"):
@@ -299,10 +307,7 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
         found = [t for t in run_episodes(agent, batch, envs, rng, bar=progress) if t.success]
     chosen = []
     for traj in found:
-        cands = [pieces.alter(traj.goals, env, rng, cfg.restrict, cfg.p_add)
-                 for _ in range(cfg.candidates)]
-        # a candidate that already holds at sT is no new task (equation 1 would favour it)
-        cands = [g for g in cands if not is_success(traj.states[-1], g, env.threshold)] or cands
+        cands = candidates(traj, env, rng, cfg, pieces.alter)
         i = pieces.select_goal(agent, traj.states[0], traj.states[-1], cands, cfg.select)
         chosen.append(cands[i])
     onward = [(traj.states[-1], goals) for traj, goals in zip(found, chosen)]
@@ -364,7 +369,8 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
     record = dict(bc_loss=bc_loss, ppo_success=[m["success"] for m in ppo_log])
     if cfg.label_tasks and cfg.label_every_round:
         # the next task expansion asks V about one alteration of exactly these tasks
-        record.update(labelled(agent, new_tasks, cfg, envs, short_envs, rng, pieces, bar, log))
+        record.update(labelled(agent, new_tasks, cfg, envs, short_envs, rng, pieces, candidates,
+                               bar, log))
     return record
 
 

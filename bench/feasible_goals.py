@@ -23,7 +23,7 @@ import taskexp  # noqa: E402
 from agent import Agent  # noqa: E402
 from taskexp_lib import one_blas_thread  # noqa: E402
 from taskexp_lib.features import relations  # noqa: E402
-from taskexp_lib.geometry import THRESHOLD, is_success, observation  # noqa: E402
+from taskexp_lib.geometry import THRESHOLD, observation  # noqa: E402
 from taskexp_lib.rollout import Worlds, run_episodes  # noqa: E402
 
 
@@ -53,9 +53,7 @@ def main():
     share, chosen = [], []
     for t in found:
         sT = t.states[-1]
-        cands = [taskexp.alter(t.goals, envs[0], rng, cfg.restrict, cfg.p_add)
-                 for _ in range(cfg.candidates)]
-        cands = [g for g in cands if not is_success(sT, g)] or cands
+        cands = taskexp.candidates(t, envs[0], rng, cfg)
         i = taskexp.select_goal(agent, t.states[0], sT, cands, cfg.select)
         ok = [feasible(sT, g) for g in cands]
         share.append(np.mean(ok))

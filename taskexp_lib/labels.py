@@ -11,7 +11,6 @@ look-ahead scores a candidate at selection time: the critic still has to learn i
 """
 import numpy as np
 
-from .geometry import is_success
 from .rollout import run_episodes
 
 
@@ -35,13 +34,13 @@ def top_candidates(agent, traj, cands, k, pieces, mode):
     return top
 
 
-def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, bar):
+def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar):
     """Label, then fit V, cfg.label_iters times; each time on cfg.label_tasks / label_iters tasks.
 
     1. run the policy on the tasks and keep the successes s0 -> sT;
-    2. for each, draw K one-alteration candidates (pieces.alter, as task expansion does) and keep
-       cfg.label_per of them: the cfg.label_top that equation (1) ranks first (where the critic
-       errs, its argmax finds it) and random others;
+    2. for each, draw K one-alteration candidates (candidates: taskexp.candidates, as task
+       expansion does) and keep cfg.label_per of them: the cfg.label_top that equation (1) ranks
+       first (where the critic errs, its argmax finds it) and random others;
     3. run the policy toward each kept candidate from sT and from s0 on the short budget: every
        state of a run is labelled with its discounted outcome, and a failure adds the
        configuration it did reach as a positive (hindsight relabelling, as in sec 4.2);
@@ -59,10 +58,7 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, bar):
         found = [t for t in run_episodes(agent, batch, envs, rng) if t.success]
         asked = []                                    # (trajectory, candidate) pairs to label
         for traj in found:
-            cands = [pieces.alter(traj.goals, env, rng, cfg.restrict, cfg.p_add)
-                     for _ in range(cfg.candidates)]
-            cands = [g for g in cands if not is_success(traj.states[-1], g, env.threshold)] \
-                or cands
+            cands = candidates(traj, env, rng, cfg, pieces.alter)
             top = top_candidates(agent, traj, cands, cfg.label_top, pieces, cfg.select)
             rest = [i for i in rng.permutation(len(cands)) if i not in top]
             asked += [(traj, cands[i]) for i in (top + rest)[: cfg.label_per]]
@@ -92,9 +88,9 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, bar):
                 label_success=n_reached / max(n_runs, 1), label_loss=loss)
 
 
-def labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, bar, log):
+def labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar, log):
     """label_outcomes, logged -> its record."""
-    out = label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, bar)
+    out = label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar)
     loss = out["label_loss"] or [float("nan")]
     log(f"  V on {out['label_rows']} labelled states from {out['label_runs']} runs "
         f"({out['label_success']:.0%} reached): loss {loss[0]:.3f} -> {loss[-1]:.3f}")
