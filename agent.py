@@ -25,6 +25,7 @@ from taskexp_lib.features import featurize
 from taskexp_lib.geometry import N_X
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.nn import Adam, check_finite, clip_grad_norm, mlp_backward
+from taskexp_lib.shards import SHARDS, Shards, replica, split, weighted_sum
 
 # ---- The factorised action distribution (sec 3):  pi(b, x, y) = pi(b) pi(x | b) pi(y | b) ----
 
@@ -227,6 +228,7 @@ class Agent:
                           dtype=self.dtype)
         self.actor_opt, self.critic_opt = Adam(self.actor.params), Adam(self.critic.params)
         self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
+        self.threads = 1        # threads for a minibatch's parts (shards.py): same results for any
 
     def features(self, obs):
         """obs (B, n, 6) -> (B, n, F) in the networks' dtype; checks the number of blocks."""
@@ -294,22 +296,32 @@ class Agent:
 
     def _fit(self, phase, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng,
              max_grad_norm, inputs=lambda o: o):
-        """Minibatch Adam on loss_fn(out, targets) -> (L, dL/dout, ...); features are computed
-        per minibatch, as (N, n, F) float64 for N = 100k would need ~300 MB. inputs(obs[idx])
-        gives the network's observations of a minibatch."""
+        """Minibatch Adam on loss_fn(out, targets) -> (L, dL/dout, ...), a mean over the samples.
+        Each minibatch runs as SHARDS parts on both cores (shards.py). Features are computed per
+        part, as (N, n, F) float64 for N = 100k would need ~300 MB. inputs(obs[idx]) gives the
+        network's observations of a part."""
         obs, opt.lr, losses = np.asarray(obs, dtype=np.float64), lr, []
-        for e in range(epochs):
-            epoch = []
-            for i, idx in enumerate(_minibatches(len(obs), batch_size, rng)):
-                out = net.forward(self.features(inputs(obs[idx])))
-                loss, dout = loss_fn(out, targets[idx])[:2]
-                grads, norm = clip_grad_norm(net.backward(dout), max_grad_norm)
-                check_finite(f"{phase} epoch {e + 1} minibatch {i + 1}", loss=loss,
-                             gradient_norm=norm)
-                opt.step(grads)
-                epoch.append(loss)
-            check_finite(f"{phase} epoch {e + 1}", parameters=net.params)
-            losses.append(float(np.mean(epoch)))
+        replicas = [replica(net) for _ in range(SHARDS)]
+
+        def part(k, idx):                            # part k of a minibatch: loss and gradients
+            out = replicas[k].forward(self.features(inputs(obs[idx])))
+            loss, dout = loss_fn(out, targets[idx])[:2]
+            return loss, replicas[k].backward(dout)
+
+        with Shards(self.threads) as shards:
+            for e in range(epochs):
+                epoch = []
+                for i, idx in enumerate(_minibatches(len(obs), batch_size, rng)):
+                    parts = split(idx)
+                    weights = [len(p) / len(idx) for p in parts]           # B_k / B
+                    loss, grads = (weighted_sum(v, weights) for v in zip(*shards.map(part, parts)))
+                    grads, norm = clip_grad_norm(grads, max_grad_norm)
+                    check_finite(f"{phase} epoch {e + 1} minibatch {i + 1}", loss=loss,
+                                 gradient_norm=norm)
+                    opt.step(grads)
+                    epoch.append(loss)
+                check_finite(f"{phase} epoch {e + 1}", parameters=net.params)
+                losses.append(float(np.mean(epoch)))
         return losses
 
     def ppo_update(self, obs, actions, logp_old, adv, returns, *, epochs, minibatch, clip,
@@ -327,8 +339,8 @@ class Agent:
            entropy      exact H of pi
            approx_kl    mean (r - 1) - log r, an unbiased, non-negative estimate of KL(old || new)
            clip_frac    fraction of samples with |r - 1| > clip
-           explained_variance  1 - Var(R - V) / Var(R) over the batch, V before the update
-                        (nan when Var(R) = 0)
+           explained_variance  1 - Var(R - V) / Var(R) over the batch, V the rollout's values
+                        (the critic before the update; nan when Var(R) = 0)
         """
         rng = self.rng if rng is None else rng
         obs, actions = np.asarray(obs, dtype=np.float64), np.asarray(actions, dtype=np.int64)
@@ -336,37 +348,46 @@ class Agent:
         logp_old, returns = np.asarray(logp_old, np.float64), np.asarray(returns, np.float64)
         adv = np.asarray(adv, dtype=np.float64)
         check_finite("PPO update: inputs", logp_old=logp_old, advantages=adv, returns=returns)
-        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
         features = self.features(obs)               # once: they do not change within the update
-        v_before = self.critic.forward(features)[..., 0].mean(-1)
+        # the critic that computed the rollout's values V is the one before the update, and
+        # GAE's returns are R = A + V, so R - V = A
         var_r = np.var(returns)
-        ev = float(1.0 - np.var(returns - v_before) / var_r) if var_r > 0 else float("nan")
+        ev = float(1.0 - np.var(adv) / var_r) if var_r > 0 else float("nan")
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
         self.actor_opt.lr = self.critic_opt.lr = lr
+        actors, critics = ([replica(net) for _ in range(SHARDS)] for net in (self.actor,
+                                                                              self.critic))
+
+        def part(k, idx):         # part k of a minibatch: both networks' losses and gradients
+            f, a, lp, A = features[idx], actions[idx], logp_old[idx], adv[idx]
+            out = actors[k].forward(f)
+            pl, dout = ppo_loss(out, a, lp, A, self.n_x, clip, ent_coef)
+            vl, dv, _ = value_loss(critics[k].forward(f), returns[idx])
+            # the loss returns (L, dL/dout) only, as exercise 4 asks: the logged figures come
+            # from the distribution again (a few element-wise operations)
+            stats = (*ppo_stats(self.action_dist(out, self.n_x), a, lp, A, clip), vl)
+            return (pl, vl, actors[k].backward(dout), critics[k].backward(vf_coef * dv),
+                    np.array(stats))
+
         stats = []
-        for e in range(epochs):
-            for i, idx in enumerate(_minibatches(len(obs), minibatch, rng)):
-                f = features[idx]
-                out = self.actor.forward(f)
-                pl, dout = ppo_loss(out, actions[idx], logp_old[idx], adv[idx], self.n_x, clip,
-                                    ent_coef)
-                g_actor, norm_actor = clip_grad_norm(self.actor.backward(dout), max_grad_norm)
-                vl, dv, _ = value_loss(self.critic.forward(f), returns[idx])
-                g_critic, norm_critic = clip_grad_norm(self.critic.backward(vf_coef * dv),
-                                                       max_grad_norm)
-                check_finite(f"PPO update epoch {e + 1} minibatch {i + 1}", policy_loss=pl,
-                             value_loss=vl, actor_gradient_norm=norm_actor,
-                             critic_gradient_norm=norm_critic)
-                self.actor_opt.step(g_actor)
-                self.critic_opt.step(g_critic)
-                # the loss returns (L, dL/dout) only, as exercise 4 asks: the logged figures
-                # come from the distribution again (a few element-wise operations)
-                l_clip, entropy, kl, clipped = ppo_stats(self.action_dist(out, self.n_x),
-                                                         actions[idx], logp_old[idx], adv[idx],
-                                                         clip)
-                stats.append((l_clip, vl, entropy, kl, clipped))
-            check_finite(f"PPO update epoch {e + 1}", actor_parameters=self.actor.params,
-                         critic_parameters=self.critic.params)
-        names = ("policy_loss", "value_loss", "entropy", "approx_kl", "clip_frac")
+        with Shards(self.threads) as shards:
+            for e in range(epochs):
+                for i, idx in enumerate(_minibatches(len(obs), minibatch, rng)):
+                    parts = split(idx)
+                    weights = [len(p) / len(idx) for p in parts]           # B_k / B
+                    pl, vl, g_actor, g_critic, s = (weighted_sum(v, weights)
+                                                    for v in zip(*shards.map(part, parts)))
+                    g_actor, norm_actor = clip_grad_norm(g_actor, max_grad_norm)
+                    g_critic, norm_critic = clip_grad_norm(g_critic, max_grad_norm)
+                    check_finite(f"PPO update epoch {e + 1} minibatch {i + 1}", policy_loss=pl,
+                                 value_loss=vl, actor_gradient_norm=norm_actor,
+                                 critic_gradient_norm=norm_critic)
+                    self.actor_opt.step(g_actor)
+                    self.critic_opt.step(g_critic)
+                    stats.append(s)
+                check_finite(f"PPO update epoch {e + 1}", actor_parameters=self.actor.params,
+                             critic_parameters=self.critic.params)
+        names = ("policy_loss", "entropy", "approx_kl", "clip_frac", "value_loss")
         return {**dict(zip(names, np.mean(stats, 0).tolist())), "explained_variance": ev}
 
     def _check_actions(self, actions):

@@ -32,7 +32,7 @@ from tqdm import tqdm
 import agent as agent_lib
 from agent import Agent
 from env2d import drop_height
-from taskexp_lib import one_blas_thread
+from taskexp_lib import one_blas_thread, rollout
 from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Config, a run's settings)
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, observation, on_same_spot
 from taskexp_lib.labels import labelled
@@ -40,6 +40,7 @@ from taskexp_lib.nn import mlp_backward
 from taskexp_lib.report import task_stats
 from taskexp_lib.rollout import Trajectory, Worlds, physics_pool, run_episodes, success_rate
 from taskexp_lib.shapes import eval_tasks
+from taskexp_lib.shards import SHARDS, read_only_map
 
 
 @contextmanager
@@ -88,7 +89,7 @@ def random_move(env, rng, free_table=False):
     return b, env.encode_action(b, x, env.y_bins[k])
 
 
-def base_demos(cfg, env, rng, count, bar=silent):
+def base_demos(cfg, envs, rng, count, bar=silent):
     """Single-step demonstrations (sec 4.1): one random block teleported somewhere it can rest.
 
     A scene starts scattered and takes cfg.warmup + 1 random moves, each a demo if usable: so the
@@ -97,22 +98,29 @@ def base_demos(cfg, env, rng, count, bar=silent):
     and as a demo at once, which saves the physics of separate warm-up moves. The goal is where
     the block came to rest, so every demo is correct by construction; up to cfg.max_stay "stay
     where you are" goals for other blocks make the goal count uniform in 1..max_stay + 1.
+    envs: the worlds (rollout.Worlds, or one BlockWorld), each with a scene of its own; their
+    moves are simulated side by side (in the physics workers, if Worlds has them).
     Returns (tasks, obs (count, n, 6), actions (count, 3)).
     """
+    worlds = envs if isinstance(envs, list) else [envs]
     tasks, obs, actions = [], [], []
-    n = env.n_blocks
+    n = worlds[0].n_blocks
+    moves_left = [0] * len(worlds)                   # of each world's scene; 0: a new scene
     with bar(total=count, desc="demos") as progress:
         while len(tasks) < count:
-            env.reset(seed=int(rng.integers(2**31)))
-            for _ in range(cfg.warmup + 1):
-                s0 = env.get_state()
-                if not on_table(s0, env):                    # a block fell off: a new scene
-                    break
+            moves = []                               # (world, block, action, state before)
+            for k, env in enumerate(worlds):
+                if moves_left[k] == 0 or not on_table(env.get_state(), env):   # or one fell off
+                    env.reset(seed=int(rng.integers(2**31)))
+                    moves_left[k] = cfg.warmup + 1
+                moves_left[k] -= 1
                 move = random_move(env, rng, cfg.free_table)
-                if move is None:
-                    continue
-                b, a = move
-                _, _, _, _, info = env.step(a)
+                if move is not None:
+                    moves.append((k, *move, env.get_state()))
+            outcomes = rollout.simulate(worlds, [k for k, *_ in moves], [a for _, _, a, _ in moves])
+            for (k, b, a, s0), outcome in zip(moves, outcomes):
+                env = worlds[k]
+                _, _, _, _, info = env.finish_step(outcome)
                 s1 = env.get_state()
                 if info["noop"] or not info["stable"] or not on_table(s1, env):
                     continue
@@ -200,7 +208,7 @@ def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print
     """Sec 4.1: the base policy. Demos that move one block, behaviour cloning, then PPO on the
     demos' tasks. Returns (the round's record, tasks, demo observations, demo actions)."""
     log(f"[round 0] base skills: {cfg.base_demos} single-block demos, BC, PPO")
-    tasks, obs, actions = base_demos(cfg, envs[0], rng, cfg.base_demos, bar)
+    tasks, obs, actions = base_demos(cfg, envs, rng, cfg.base_demos, bar)
     bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
     log(f"  BC loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
     ppo_log = ppo_phase(agent, tasks, cfg, envs, short_envs, rng, "PPO base", pieces=pieces,
@@ -304,15 +312,17 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     env, pieces = envs[0], pieces or Pieces()
     batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
     with bar(total=len(batch), desc="collect") as progress:
-        found = [t for t in run_episodes(agent, batch, envs, rng, bar=progress) if t.success]
-    chosen = []
-    for traj in found:
-        cands = candidates(traj, env, rng, cfg, pieces.alter)
-        i = pieces.select_goal(agent, traj.states[0], traj.states[-1], cands, cfg.select)
-        chosen.append(cands[i])
+        found = [t for t in run_episodes(agent, batch, envs, rng, bar=progress, values=False)
+                 if t.success]
+    asked = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
+    # equation (1) draws nothing at random, so both cores share the trajectories
+    pick = lambda ag, job: pieces.select_goal(ag, job[0].states[0], job[0].states[-1], job[1],
+                                              cfg.select)
+    picks = read_only_map(agent, pick, list(zip(found, asked)), agent.threads)
+    chosen = [cands[i] for cands, i in zip(asked, picks)]
     onward = [(traj.states[-1], goals) for traj, goals in zip(found, chosen)]
     with bar(total=len(onward), desc="verify") as progress:
-        verified = run_episodes(agent, onward, short_envs, rng, bar=progress)
+        verified = run_episodes(agent, onward, short_envs, rng, bar=progress, values=False)
     demos, n_joined = [], 0
     for traj, goals, more in zip(found, chosen, verified):
         joined = join(traj, more, goals, more.success)
@@ -449,13 +459,15 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
 
     To go on with a stopped run, pass its agent, RunState and Generator. on_round(k, agent, run,
     rng), if given, is called after every round (the CLI saves checkpoints there). workers > 1
-    runs the physics in that many processes; the results are the same for any number.
+    runs the physics in that many processes and shares each network minibatch between two
+    threads (taskexp_lib/shards.py); the results are the same for any number.
     """
     pieces = pieces or Pieces()
     rng = np.random.default_rng(cfg.seed) if rng is None else rng
     agent = agent or make_agent(cfg, pieces.mlp_backward)
     run = run or RunState(results=dict(config=asdict(cfg), rounds=[], wallclock={}))
     drop = cfg.action == "drop"
+    agent.threads = min(workers, SHARDS)      # both cores on every minibatch (the same results)
     with one_blas_thread(), physics_pool(workers, cfg.n_blocks, drop) as pool:
         envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool, drop)
         short_envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool, drop)

@@ -4,40 +4,58 @@
     python bench/bench_speed.py --skip-full     # without the timed default run (~4 min)
 
 Prints:
-1. the default run (`python taskexp.py --rounds 3`, all cores): wall time in all and per round;
+1. the default run (`python taskexp.py --rounds 3`, all cores): wall time in all and per round,
+   CPU utilisation (user + system time of the main process and its physics workers / wall
+   time), peak memory;
 2. the share of physics, network forward/backward and everything else, measured with timers
-   around BlockWorld.simulate and the MLPs in a --scale 0.25 run with one worker (the physics in
-   the main process, so that it can be timed);
-3. one BC epoch and one PPO update against the cost of their matrix products alone, timed on
-   the same shapes on this CPU;
+   around BlockWorld.simulate and the networks in a --scale 0.25 run with one worker and one
+   thread (the physics in the main process, so that it can be timed);
+3. one BC epoch and one PPO update of the default network against the cost of their matrix
+   products alone, timed on the same shapes on this CPU in one thread, with one thread and with
+   both cores (taskexp_lib/shards.py), after what a second core gives a matrix product and an
+   element-wise loop of those shapes;
 4. env actions/s (bench/bench_env.py) and time per round with 4, 6 and 8 blocks.
 Timings depend on the machine and on what else runs: run it with nothing else on the cores.
 """
 import argparse
+import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import replace
 
 import numpy as np
 
-import agent
 import env2d
 import taskexp
 from taskexp_lib import cli, nn, one_blas_thread
 from taskexp_lib.config import Config
+from taskexp_lib.nets import NETWORKS
+from taskexp_lib.shards import SHARDS
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
+def cpu_seconds():
+    """User + system CPU time of this process and of its children that have ended."""
+    me, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(
+        resource.RUSAGE_CHILDREN)
+    return me.ru_utime + me.ru_stime + children.ru_utime + children.ru_stime
+
+
 def timed_run(cfg, workers, out):
-    """cli.run in `out` -> (seconds, {round: seconds})."""
-    t0 = time.perf_counter()
+    """cli.run in `out` -> (seconds, {round: seconds}, CPU utilisation: the CPU time of the main
+    process and its physics workers over the wall time, at most the number of cores)."""
+    t0, cpu0 = time.perf_counter(), cpu_seconds()
     results = cli.run(cfg, out, log=lambda *a: None, workers=workers)
+    wall = time.perf_counter() - t0
     clock = results["wallclock"]
-    return time.perf_counter() - t0, {k: clock[f"round{k}_s"] for k in range(cfg.rounds + 1)}
+    per_round = {k: clock[f"round{k}_s"] for k in range(cfg.rounds + 1)}
+    return wall, per_round, (cpu_seconds() - cpu0) / wall
 
 
 class Timer:
@@ -60,10 +78,12 @@ class Timer:
 
 
 def shares(cfg, out):
+    """A run with one worker and one thread, timed around the physics and the networks."""
     timers = {"physics": [Timer(env2d.BlockWorld, "simulate")],
-              "network": [Timer(nn.MLP, "forward"), Timer(nn.MLP, "backward")]}
+              "network": [Timer(Net, name) for Net in NETWORKS.values()
+                          for name in ("forward", "backward")]}
     try:
-        total, _ = timed_run(cfg, 1, out)
+        total, _, _ = timed_run(cfg, 1, out)
     finally:
         for ts in timers.values():
             for t in ts:
@@ -73,28 +93,73 @@ def shares(cfg, out):
     return total, spent
 
 
+def products(net, B, n):
+    """The matrix products of one forward and backward of `net` on B x n tokens, as operand
+    shapes: for every weight W of an MLP or an attention projection, x W, x^T d and d W^T; for
+    attention, the per-head products (Q K^T, A V; dY V^T, A^T dY, dS K, dS^T Q)."""
+    rows, out = B * n, []
+    modules = getattr(net, "modules", {"phi": getattr(net, "phi", None),
+                                       "rho": getattr(net, "rho", None)})
+    for m in modules.values():
+        if isinstance(m, nn.MLP):
+            Ws = [m.params[f"W{k}"] for k in range(m.n_layers)]
+        elif isinstance(m, nn.SelfAttention):
+            Ws = [m.params[f"W{c}"] for c in m.NAMES]
+            h, d = m.heads, m.d
+            out += [((B, h, n, d), (B, h, d, n))] * 2 + [((B, h, n, n), (B, h, n, d))] * 4
+        else:
+            continue
+        for W in Ws:
+            i, o = W.shape
+            out += [((rows, i), (i, o)), ((i, rows), (rows, o)), ((rows, o), (o, i))]
+    return out
+
+
 def matmul_seconds(net, B, n, repeats):
-    """The matrix products of one forward and backward of a SetNet on B x n tokens, alone."""
-    rows, seconds = B * n, 0.0
-    for mlp in (net.phi, net.rho):
-        for k in range(mlp.n_layers):
-            W = mlp.params[f"W{k}"]
-            x = np.ones((rows, W.shape[0]), W.dtype)
-            d = np.ones((rows, W.shape[1]), W.dtype)
-            t0 = time.perf_counter()
+    """The matrix products of one forward and backward of `net` on B x n tokens, alone, in one
+    thread: the best of `repeats` timings (a floor should not carry the machine's noise)."""
+    ops = [(np.ones(a, net.dtype), np.ones(b, net.dtype)) for a, b in products(net, B, n)]
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for x, y in ops:
+            x @ y
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def two_cores(repeats=2000):
+    """How much more a matrix product and an element-wise loop of one part's shape (128 samples x
+    6 blocks, width 128) get done on two threads than on one: {name: speed-up}. The ceiling of
+    the data-parallel gradients on this machine."""
+    x, W = np.ones((768, 128), np.float32), np.ones((128, 128), np.float32)
+    jobs = {"matrix product": lambda: x @ W, "element-wise tanh": lambda: np.tanh(x)}
+    out = {}
+    for name, job in jobs.items():
+        def work():
             for _ in range(repeats):
-                x @ W, x.T @ d, d @ W.T                  # forward, dW, dx
-            seconds += (time.perf_counter() - t0) / repeats
-    return seconds
+                job()
+        seconds = []
+        for threads in (1, 2):
+            pool = [threading.Thread(target=work) for _ in range(threads)]
+            t0 = time.perf_counter()
+            for t in pool:
+                t.start()
+            for t in pool:
+                t.join()
+            seconds.append((time.perf_counter() - t0) / threads)      # per unit of work
+        out[name] = seconds[0] / seconds[1]
+    return out
 
 
-def network_ratios(cfg):
+def network_ratios(cfg, threads):
+    """One BC epoch and one PPO update of the default agent on 4096 base demos, with `threads`
+    threads -> ((BC seconds, their matrix products alone), (PPO ...), samples)."""
     rng = np.random.default_rng(0)
-    env = env2d.BlockWorld(cfg.n_blocks)
-    tasks, obs, actions = taskexp.base_demos(cfg, env, rng, 4096)
-    # the deep set over the relations, in the world that places: the network this bench measures
-    ag = agent.Agent(cfg.n_blocks, n_y=cfg.n_blocks, hidden=cfg.hidden, dtype=cfg.dtype,
-                     network="setnet", features="relations")
+    worlds = env2d.BlockWorld(cfg.n_blocks, drop=True)
+    tasks, obs, actions = taskexp.base_demos(cfg, worlds, rng, 4096)
+    ag = taskexp.make_agent(cfg)
+    ag.threads = threads
     t0 = time.perf_counter()
     ag.bc(obs, actions, 1, cfg.bc_batch, cfg.bc_lr, rng)
     bc = time.perf_counter() - t0
@@ -125,31 +190,43 @@ def main():
     p.add_argument("--skip-full", action="store_true", help="skip the timed default run")
     a = p.parse_args()
     cfg, workers = Config(), cli.usable_cores()
-    print(f"config: the defaults of taskexp_lib.config.Config (networks in {cfg.dtype}); "
-          f"{workers} cores")
+    print(f"config: the defaults of taskexp_lib.config.Config ({cfg.network} over {cfg.features} "
+          f"features, networks in {cfg.dtype}); {workers} cores")
     with tempfile.TemporaryDirectory() as tmp:
         if not a.skip_full:
-            total, per_round = timed_run(cfg, workers, os.path.join(tmp, "full"))
+            out = os.path.join(tmp, "full")
+            total, per_round, cpu = timed_run(cfg, workers, out)
             rounds = ", ".join(f"{k}: {s:.0f} s" for k, s in per_round.items())
-            print(f"\n1. default run, --workers {workers}: {total:.0f} s ({rounds})")
+            with open(os.path.join(out, "results.json")) as f:
+                memory = json.load(f)["wallclock"]["peak_memory_mb"]
+            print(f"\n1. default run, --workers {workers}: {total:.0f} s ({rounds}); CPU "
+                  f"utilisation {cpu:.2f} of {workers} cores; peak memory of the main process "
+                  f"{memory} MB")
         small = cli.parse_args(["--rounds", "1", "--scale", "0.25", "--out", "unused"]).cfg
         total, spent = shares(small, os.path.join(tmp, "shares"))
-        print(f"\n2. where the time goes (--rounds 1 --scale 0.25, one process): {total:.1f} s")
+        print(f"\n2. where the time goes (--rounds 1 --scale 0.25, one process, one thread): "
+              f"{total:.1f} s")
         for name, s in spent.items():
             print(f"   {name:16s} {s:6.1f} s  {100 * s / total:4.0f}%")
-        (bc, bc_mm), (ppo, ppo_mm), n = network_ratios(cfg)
-        print(f"\n3. networks ({cfg.dtype}, {n} samples): one BC epoch {bc:.2f} s = "
-              f"{bc / bc_mm:.1f}x its matrix products alone ({bc_mm:.2f} s); one PPO update "
-              f"({cfg.ppo_epochs} epochs) {ppo:.2f} s = {ppo / ppo_mm:.1f}x ({ppo_mm:.2f} s)")
-        print("\n4. blocks: time per round (--rounds 1 --scale 0.1, one process) and env speed")
+        print(f"\n3. networks ({cfg.dtype}): one BC epoch and one PPO update ({cfg.ppo_epochs} "
+              "epochs) against their matrix products timed alone (one thread)")
+        gains = ", ".join(f"{name} {gain:.2f}x" for name, gain in two_cores().items())
+        print(f"   both cores against one, alone: {gains}")
+        for threads in sorted({1, min(workers, SHARDS)}):
+            (bc, bc_mm), (ppo, ppo_mm), n = network_ratios(cfg, threads)
+            print(f"   {threads} thread{'s' * (threads > 1)}, {n} samples: BC epoch {bc:.2f} s = "
+                  f"{bc / bc_mm:.2f}x its products ({bc_mm:.2f} s); PPO update {ppo:.2f} s = "
+                  f"{ppo / ppo_mm:.2f}x ({ppo_mm:.2f} s)")
+        print(f"\n4. blocks: time per round (--rounds 1 --scale 0.1, --workers {workers}) and env "
+              "speed (one core)")
         for n_blocks in (4, 6, 8):
             shapes = ("I",) if n_blocks < 6 else Config.shapes
             cfg_n = replace(small, n_blocks=n_blocks, shapes=shapes, base_demos=2000,
                             ppo_steps=2000, expand_episodes=300, eval_episodes=10)
-            total, per_round = timed_run(cfg_n, 1, os.path.join(tmp, f"n{n_blocks}"))
-            line = next(s for s in env_throughput(n_blocks) if "actions/s" in s)
+            total, per_round, _ = timed_run(cfg_n, workers, os.path.join(tmp, f"n{n_blocks}"))
+            line = next(s for s in env_throughput(n_blocks) if s.startswith("actions/s"))
             print(f"   n = {n_blocks}: round 0 {per_round[0]:.1f} s, round 1 {per_round[1]:.1f} s;"
-                  f" {line.strip()}")
+                  f" {' '.join(line.split())}")
 
 
 if __name__ == "__main__":

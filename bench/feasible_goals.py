@@ -49,7 +49,7 @@ def main():
     envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, drop=drop)
     short = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, drop=drop)
     tasks, _, _ = taskexp.base_demos(cfg, envs[0], rng, a.tasks)
-    found = [t for t in run_episodes(agent, tasks, envs, rng) if t.success]
+    found = [t for t in run_episodes(agent, tasks, envs, rng, values=False) if t.success]
     share, chosen = [], []
     for t in found:
         sT = t.states[-1]
@@ -58,7 +58,8 @@ def main():
         ok = [feasible(sT, g) for g in cands]
         share.append(np.mean(ok))
         chosen.append((cands[i], ok[i]))
-    runs = run_episodes(agent, [(t.states[-1], g) for t, (g, _) in zip(found, chosen)], short, rng)
+    runs = run_episodes(agent, [(t.states[-1], g) for t, (g, _) in zip(found, chosen)], short, rng,
+                        values=False)
     reached = np.array([r.success for r in runs])
     picked = np.array([ok for _, ok in chosen])
     print(f"{a.checkpoint}: {len(found)} of {len(tasks)} base tasks solved; K = {cfg.candidates}")

@@ -8,6 +8,7 @@ the agent (agent.py): what those three are built from, and the plumbing around t
   features.py    what the networks see of each block
   nets.py        the attention network and the deep set over block tokens
   rollout.py     batched episodes, and the worker processes that run the physics
+  shards.py      both cores on one minibatch: data-parallel gradients in two threads
   checkpoint.py  every file a run writes: checkpoints, the resume state, results.json
   report.py      Tables 1 and 2, Figures 1 and 2
   cli.py         the command line: flags, the run directory, --resume, progress bars

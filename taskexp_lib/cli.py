@@ -83,8 +83,9 @@ def parser():
                    help="multiply every data and step budget (0.05: a smoke test whose "
                         "numbers mean nothing; default 1)")
     p.add_argument("--workers", type=int, default=None,
-                   help="processes that run the physics (default: the cores this machine lets the "
-                        "run use); the results are the same for any number")
+                   help="processes that run the physics, and threads (at most 2) that share each "
+                        "network minibatch (default: the cores this machine lets the run use); "
+                        "the results are the same for any number")
     p.add_argument("--resume", action="store_true",
                    help="go on from the last complete round of the run in --out, with its settings "
                         "(--rounds may raise the number of rounds)")
@@ -116,7 +117,7 @@ class Invocation(NamedTuple):
     out: str                # its directory
     resume: bool            # go on with the run in `out`
     scale: float            # the factor --scale applied to the budgets (1: none)
-    workers: int            # processes for the physics; the results do not depend on it
+    workers: int            # physics processes and network threads; the results do not change
 
 
 def usable_cores():

@@ -12,6 +12,7 @@ look-ahead scores a candidate at selection time: the critic still has to learn i
 import numpy as np
 
 from .rollout import run_episodes
+from .shards import read_only_map
 
 
 def discounted_outcome(traj, gamma):
@@ -55,18 +56,20 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
     for it in range(cfg.label_iters):
         size = cfg.label_tasks // cfg.label_iters
         batch = [tasks[i] for i in rng.integers(len(tasks), size=size)]
-        found = [t for t in run_episodes(agent, batch, envs, rng) if t.success]
+        found = [t for t in run_episodes(agent, batch, envs, rng, values=False) if t.success]
+        drawn = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
+        rank = lambda ag, job: top_candidates(ag, job[0], job[1], cfg.label_top, pieces,
+                                              cfg.select)
+        tops = read_only_map(agent, rank, list(zip(found, drawn)), agent.threads)
         asked = []                                    # (trajectory, candidate) pairs to label
-        for traj in found:
-            cands = candidates(traj, env, rng, cfg, pieces.alter)
-            top = top_candidates(agent, traj, cands, cfg.label_top, pieces, cfg.select)
+        for traj, cands, top in zip(found, drawn, tops):
             rest = [i for i in rng.permutation(len(cands)) if i not in top]
             asked += [(traj, cands[i]) for i in (top + rest)[: cfg.label_per]]
         with bar(total=2 * len(asked), desc=f"label {it + 1}") as progress:
             from_end = run_episodes(agent, [(t.states[-1], g) for t, g in asked], short_envs,
-                                    rng, bar=progress)
+                                    rng, bar=progress, values=False)
             from_start = run_episodes(agent, [(t.states[0], g) for t, g in asked], short_envs,
-                                      rng, bar=progress)
+                                      rng, bar=progress, values=False)
         for a, b in zip(from_end, from_start):   # V(sT, g) and V(s0, g): what equation (1) reads
             pairs.append(np.stack([a.obs()[0], b.obs()[0]]))
             pair_targets.append([discounted_outcome(e, cfg.gamma)[0] for e in (a, b)])

@@ -59,8 +59,9 @@ class MLP:
         """x (B, in) -> (B, out).  Caches every layer's output for backward."""
         self.hs = [x]
         for k in range(self.n_layers):
-            z = self.hs[-1] @ self.params[f"W{k}"] + self.params[f"b{k}"]
-            self.hs.append(np.tanh(z) if k < self.n_layers - 1 else z)
+            z = self.hs[-1] @ self.params[f"W{k}"]
+            z += self.params[f"b{k}"]                     # in place: no second array
+            self.hs.append(np.tanh(z, out=z) if k < self.n_layers - 1 else z)
         return self.hs[-1]
 
     def backward(self, dout):

@@ -88,12 +88,24 @@ class Trajectory:
         return np.stack([observation(s, g) for s in self.states])
 
 
-def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None):
+def simulate(envs, ks, actions):
+    """The physics of one action in each world envs[k], k in ks -> [(state after, noop, stable,
+    substeps)] in order: in the workers of envs.pool if there is one, else one after the other."""
+    states = [envs[k].get_state() for k in ks]
+    pool = getattr(envs, "pool", None)
+    if pool is None:
+        return [envs[k].simulate(state, a) for k, state, a in zip(ks, states, actions)]
+    return pool.simulate(states, actions)
+
+
+def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None, values=True):
     """Run one episode per task, len(envs) at a time with one batched policy call per step.
 
     tasks: list of (state (n, 6), goals); envs: a list of BlockWorlds, or Worlds whose pool
     runs the physics. Returns a list of Trajectory in the order of `tasks`.
     bar: a progress bar (tqdm) to advance by one per finished episode.
+    values: record log pi(a) and V(s, g) of every step, which PPO needs; without them (0s) the
+    critic is not run, and the actions drawn are the same.
     """
     out = [None] * len(tasks)
     todo = iter(range(len(tasks)))
@@ -115,23 +127,19 @@ def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None):
         if not active:
             return out
         obs = np.stack([slots[k]["obs"] for k in active])
-        if deterministic:
-            no_stats = np.zeros(len(active))
-            actions, logp, values = agent.act(obs, deterministic=True), no_stats, no_stats
+        if values and not deterministic:
+            actions, logp, v = agent.sample(obs, rng)
         else:
-            actions, logp, values = agent.sample(obs, rng)
-        pool = getattr(envs, "pool", None)
-        if pool is None:
-            outcomes = [envs[k].simulate(envs[k].get_state(), a) for k, a in zip(active, actions)]
-        else:
-            outcomes = pool.simulate([envs[k].get_state() for k in active], actions)
+            actions = agent.act(obs, deterministic, rng)
+            logp = v = np.zeros(len(active))
+        outcomes = simulate(envs, active, actions)
         for j, k in enumerate(active):
             s = slots[k]
             s["obs"], reward, terminated, truncated, _ = envs[k].finish_step(outcomes[j])
             s["states"].append(envs[k].get_state())
             s["actions"].append(actions[j])
             s["logp"].append(logp[j])
-            s["values"].append(values[j])
+            s["values"].append(v[j])
             if terminated or truncated:
                 out[s["i"]] = Trajectory(tasks[s["i"]][1], np.stack(s["states"]),
                                          np.stack(s["actions"]), bool(terminated),
