@@ -32,7 +32,7 @@ def test_parts_weighted_by_their_share_give_the_whole_minibatch_gradient(network
     whole = net.backward(bc_loss(net.forward(f), actions, agent.n_x)[1])
     parts = split(np.arange(5))
     grads = []
-    for k, idx in enumerate(parts):
+    for idx in parts:
         twin = replica(net)
         grads.append(twin.backward(bc_loss(twin.forward(f[idx]), actions[idx], agent.n_x)[1]))
     summed = weighted_sum(grads, [len(p) / 5 for p in parts])
