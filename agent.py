@@ -25,7 +25,7 @@ from taskexp_lib.features import featurize
 from taskexp_lib.geometry import N_X
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.nn import Adam, check_finite, clip_grad_norm, mlp_backward
-from taskexp_lib.shards import SHARDS, Shards, replica, split, weighted_sum
+from taskexp_lib.shards import SHARDS, Shards, replica
 
 # ---- The factorised action distribution (sec 3):  pi(b, x, y) = pi(b) pi(x | b) pi(y | b) ----
 
@@ -312,9 +312,7 @@ class Agent:
             for e in range(epochs):
                 epoch = []
                 for i, idx in enumerate(_minibatches(len(obs), batch_size, rng)):
-                    parts = split(idx)
-                    weights = [len(p) / len(idx) for p in parts]           # B_k / B
-                    loss, grads = (weighted_sum(v, weights) for v in zip(*shards.map(part, parts)))
+                    loss, grads = shards.mean(part, idx)
                     grads, norm = clip_grad_norm(grads, max_grad_norm)
                     check_finite(f"{phase} epoch {e + 1} minibatch {i + 1}", loss=loss,
                                  gradient_norm=norm)
@@ -373,10 +371,7 @@ class Agent:
         with Shards(self.threads) as shards:
             for e in range(epochs):
                 for i, idx in enumerate(_minibatches(len(obs), minibatch, rng)):
-                    parts = split(idx)
-                    weights = [len(p) / len(idx) for p in parts]           # B_k / B
-                    pl, vl, g_actor, g_critic, s = (weighted_sum(v, weights)
-                                                    for v in zip(*shards.map(part, parts)))
+                    pl, vl, g_actor, g_critic, s = shards.mean(part, idx)
                     g_actor, norm_actor = clip_grad_norm(g_actor, max_grad_norm)
                     g_critic, norm_critic = clip_grad_norm(g_critic, max_grad_norm)
                     check_finite(f"PPO update epoch {e + 1} minibatch {i + 1}", policy_loss=pl,

@@ -156,8 +156,8 @@ def network_ratios(cfg, threads):
     """One BC epoch and one PPO update of the default agent on 4096 base demos, with `threads`
     threads -> ((BC seconds, their matrix products alone), (PPO ...), samples)."""
     rng = np.random.default_rng(0)
-    worlds = env2d.BlockWorld(cfg.n_blocks, drop=True)
-    tasks, obs, actions = taskexp.base_demos(cfg, worlds, rng, 4096)
+    env = env2d.BlockWorld(cfg.n_blocks, drop=True)
+    tasks, obs, actions = taskexp.base_demos(cfg, env, rng, 4096)
     ag = taskexp.make_agent(cfg)
     ag.threads = threads
     t0 = time.perf_counter()

@@ -61,6 +61,13 @@ class Shards:
         first = step(0, parts[0])
         return [first] + [f.result() for f in futures]
 
+    def mean(self, step, idx):
+        """The minibatch idx in its parts: step(k, part) gives a tuple of means over part k
+        (losses, gradients); -> the same tuple over the whole minibatch, sum_k (B_k / B) (...)_k."""
+        parts = split(idx)
+        weights = [len(p) / len(idx) for p in parts]                   # B_k / B
+        return tuple(weighted_sum(v, weights) for v in zip(*self.map(step, parts)))
+
     def __enter__(self):
         return self
 
