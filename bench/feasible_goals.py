@@ -2,6 +2,7 @@
 
     python bench/feasible_goals.py runs/ours-seed0/round0.npz
     python bench/feasible_goals.py runs/relations/ours-seed0/round0.npz
+    python bench/feasible_goals.py runs/ours-seed0/round0.npz --json feasible.json
 
 Runs the checkpoint's policy on fresh base tasks (sec 4.1), and for every success s0 -> sT draws K
 one-alteration candidates and picks g* by equation (1), as task_expansion does. A candidate is
@@ -13,6 +14,7 @@ feasible goals among all candidates and among the chosen ones, and how often the
 run from sT (cfg.short_steps actions) reaches g*, for feasible and infeasible picks.
 """
 import argparse
+import json
 import os
 import sys
 
@@ -35,21 +37,17 @@ def feasible(state, goals):
     return rel["needs_support"].max() == 0 and rel["blocked"].max() == 0
 
 
-def main():
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("checkpoint")
-    p.add_argument("--tasks", type=int, default=600, help="base tasks to start from")
-    p.add_argument("--seed", type=int, default=5)
-    a = p.parse_args()
-    agent = Agent.load(a.checkpoint)
+def measure(checkpoint, tasks=600, seed=5):
+    """The diagnostic for one checkpoint -> dict of the shares (0..1) and counts it prints."""
+    agent = Agent.load(checkpoint)
     drop = taskexp.drops(agent)
     cfg = taskexp.Config(features=agent.feature_set, network=agent.network,
                          action="drop" if drop else "place")
-    rng = np.random.default_rng(a.seed)
+    rng = np.random.default_rng(seed)
     envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, drop=drop)
     short = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, drop=drop)
-    tasks, _, _ = taskexp.base_demos(cfg, envs[0], rng, a.tasks)
-    found = [t for t in run_episodes(agent, tasks, envs, rng, values=False) if t.success]
+    base, _, _ = taskexp.base_demos(cfg, envs[0], rng, tasks)
+    found = [t for t in run_episodes(agent, base, envs, rng, values=False) if t.success]
     share, chosen = [], []
     for t in found:
         sT = t.states[-1]
@@ -62,11 +60,31 @@ def main():
                         values=False)
     reached = np.array([r.success for r in runs])
     picked = np.array([ok for _, ok in chosen])
-    print(f"{a.checkpoint}: {len(found)} of {len(tasks)} base tasks solved; K = {cfg.candidates}")
-    print(f"  feasible among all candidates  {100 * np.mean(share):.0f}%")
-    print(f"  feasible among the chosen g*   {100 * picked.mean():.0f}%")
-    print(f"  g* reached from sT: {100 * reached.mean():.0f}% (feasible picks "
-          f"{100 * reached[picked].mean():.0f}%, infeasible {100 * reached[~picked].mean():.0f}%)")
+    mean = lambda x: float(np.mean(x)) if len(x) else float("nan")
+    return dict(tasks=tasks, solved=len(found), candidates=cfg.candidates,
+                feasible_candidates=mean(share), feasible_picks=mean(picked),
+                reached=mean(reached), reached_feasible=mean(reached[picked]),
+                reached_infeasible=mean(reached[~picked]))
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("checkpoint")
+    p.add_argument("--tasks", type=int, default=600, help="base tasks to start from")
+    p.add_argument("--seed", type=int, default=5)
+    p.add_argument("--json", help="also write the figures to this file (bench/reproduce.py)")
+    a = p.parse_args()
+    m = measure(a.checkpoint, a.tasks, a.seed)
+    if a.json:
+        with open(a.json, "w") as f:
+            json.dump(m, f, indent=1)
+    pc = lambda key: f"{100 * m[key]:.0f}%"
+    print(f"{a.checkpoint}: {m['solved']} of {m['tasks']} base tasks solved; "
+          f"K = {m['candidates']}")
+    print(f"  feasible among all candidates  {pc('feasible_candidates')}")
+    print(f"  feasible among the chosen g*   {pc('feasible_picks')}")
+    print(f"  g* reached from sT: {pc('reached')} (feasible picks {pc('reached_feasible')}, "
+          f"infeasible {pc('reached_infeasible')})")
 
 
 if __name__ == "__main__":

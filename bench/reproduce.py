@@ -10,24 +10,26 @@ once with the hand-computed relations (--features relations).
 Each run is one `taskexp.py` process through bench/run_seeds.py: finished runs are reused and
 stopped ones resumed, so a stopped report goes on where it was. Runs of the default features go
 to runs/<variant>-seed<k> (where the notebooks look), the others to runs/<features>/...
-Writes RESULTS.md (mean +- std over seeds, the targets of the issue checked against them, the
+Writes RESULTS.md (mean +- std over seeds, the targets checked against them, the
 machine and the wall-clock time), its figures in results/, and appends bench/discussion.md, the
 team's reading of the numbers, which is written by hand.
 """
 import argparse
+import json
 import os
 import platform
+import subprocess
 import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
-from matplotlib.figure import Figure
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from run_seeds import pm, run_one  # noqa: E402
+from run_seeds import DIRS, pm, run_one  # noqa: E402
 
 from taskexp_lib.config import Config  # noqa: E402
+from taskexp_lib.report import DPI, FIGURES, histogram_figure  # noqa: E402
 
 # The paper's numbers (shared/paper/README.md): Table 1 by round 1-3, Table 2 by round 1-3,
 # Table 3 after round 1; direct PPO: 0% on every shape (sec 5.3).
@@ -63,6 +65,29 @@ def picks_reached(rows):
     or a dash for a round without task expansion (or a run older than the measurement)."""
     shares = [w.get("expansion", {}).get("picks_reached") for w in rows]
     return "-" if None in shares else pm([100 * s for s in shares], "%")
+
+
+def feasibility(out, tasks):
+    """bench/feasible_goals.py on a run's round-0 critic: how many of equation (1)'s picks one
+    drop can meet. Kept in the run's folder, so a report written again reuses it."""
+    path = os.path.join(out, "feasible_goals.json")
+    if not os.path.exists(path):
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "feasible_goals.py")
+        subprocess.run([sys.executable, script, os.path.join(out, "round0.npz"), "--tasks",
+                        str(tasks), "--json", path], check=True, capture_output=True)
+    with open(path) as f:
+        return json.load(f)
+
+
+def table_feasible(runs):
+    """The leading indicator: the round-0 critic's picks, mean +- std over seeds."""
+    cell = lambda key: pm([100 * r["feasible"][key] for r in runs], "%")
+    return ["| round-0 critic | feasible among all candidates | feasible among the chosen g* | "
+            "g* reached from s_T | reached, feasible picks | reached, infeasible picks |",
+            "|---|---|---|---|---|---|",
+            f"| `bench/feasible_goals.py` | {cell('feasible_candidates')} | "
+            f"{cell('feasible_picks')} | {cell('reached')} | {cell('reached_feasible')} | "
+            f"{cell('reached_infeasible')} |"]
 
 
 def table1(runs, rounds):
@@ -104,26 +129,8 @@ def table3(by_variant, k, shapes):
     return out
 
 
-def figure(runs, rounds, key, first_bin, xlabel, path):
-    """A round-by-round bar chart of a task histogram (fractions), mean over seeds, std as bars."""
-    fig = Figure(figsize=(5.5, 3.2))
-    ax = fig.add_subplot()
-    width = 0.8 / (rounds + 1)
-    for k in range(rounds + 1):
-        fr = np.array([np.array(r["rounds"][k][key], float) / max(sum(r["rounds"][k][key]), 1)
-                       for r in runs])
-        x = np.arange(fr.shape[1]) + first_bin + (k - rounds / 2) * width
-        ax.bar(x, fr.mean(0), width, yerr=fr.std(0), label=f"round {k}" + (" (base)" if k == 0
-                                                                            else ""))
-    ax.set_xlabel(xlabel)
-    ax.set_ylabel("fraction of generated tasks")
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=100)
-
-
 def targets(by_variant, rounds, shapes):
-    """The issue's targets, each with what was measured and whether it holds (on seed means)."""
+    """The targets, each with what was measured and whether it holds (on seed means)."""
     ours = by_variant["ours"]
     layers = [np.mean([mean_layer(r["rounds"][k]["max_height_hist"]) for r in ours])
               for k in range(1, rounds + 1)]
@@ -134,12 +141,20 @@ def targets(by_variant, rounds, shapes):
     out = [("mean highest-goal layer of generated tasks rises every round (rounds 1..%d)" % rounds,
             " -> ".join(f"{v:.2f}" for v in layers), all(np.diff(layers) > 0)),
            (f"tasks with >= 3 high goals grow >= 5x from round 1 to {rounds}",
-            f"{high[0]:.0f} -> {high[1]:.0f}", high[1] >= 5 * high[0] and high[1] > 0),
+            f"{high[0]:.0f} -> {high[1]:.0f}",
+            high[0] > 0 and high[1] >= 5 * high[0]),          # 0 -> 81 is no multiple of 0
            (f"zero-shot success rises from round 1 to {rounds} on every shape",
             ", ".join(f"{s} {a:.0f}% -> {b:.0f}%" for s, (a, b) in per_shape.items()),
             all(b > a for a, b in per_shape.values())),
            (f"round-{rounds} mean over shapes >= 77% (the paper's round-3 mean)",
-            f"{zs[1]:.0f}%", zs[1] >= 77)]
+            f"{zs[1]:.0f}%", zs[1] >= 77),
+           (f"round-{rounds} mean over shapes: spread over seeds <= 10 points",
+            f"{np.std([success(r, rounds) for r in ours]):.0f} points",
+            np.std([success(r, rounds) for r in ours]) <= 10)]
+    if all("feasible" in r for r in ours):
+        picks = np.mean([100 * r["feasible"]["feasible_picks"] for r in ours])
+        out.insert(0, ("feasible among equation (1)'s picks, round-0 critic >= 75%",
+                       f"{picks:.0f}%", picks >= 75))
     if "direct-ppo" in by_variant:
         worst = {s: max(success(r, k, s) for r in by_variant["direct-ppo"]
                         for k in range(1, rounds + 1)) for s in shapes}
@@ -195,7 +210,11 @@ def main():
         extra = ["--features", f] + (["--scale", a.scale] if a.scale else [])
         rounds = a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
         print(f"[{time.time() - start:5.0f}s] {f} {v} seed {s}", flush=True)
-        return job, run_one(v, s, rounds, root, extra)[2]
+        results = run_one(v, s, rounds, root, extra)[2]
+        if v == "ours":                   # the critic's leading indicator, on its round-0 copy
+            out = os.path.join(root, f"{DIRS.get(v, v)}-seed{s}")
+            results["feasible"] = feasibility(out, max(50, int(600 * float(a.scale or 1))))
+        return job, results
 
     with ThreadPoolExecutor(a.jobs) as pool:
         done = dict(pool.map(one, jobs))
@@ -217,14 +236,18 @@ def main():
                "Wall-clock per run, seconds (two runs at a time, one worker each): "
                + ", ".join(f"{v} {c}" for v, c in clock.items()) + ".", "",
                "### Targets", "", *targets(by_variant, a.rounds, shapes), "",
+               "### Does equation (1) pick goals the policy can reach?", "",
+               "Of the K one-alteration candidates at s_T, how many one drop can meet, and how "
+               "many of the goals equation (1) picks (600 base tasks per seed, judged by the "
+               "hand-computed relations, which plain features never show the agent):", "",
+               *table_feasible(ours), "",
                "### Table 1: generated tasks (ours)", "", *table1(ours, a.rounds), ""]
-        for key, name, first, xlabel in (("max_height_hist", "fig1", 0, "highest goal (layer)"),
-                                         ("goal_count_hist", "fig2", 1, "number of goals")):
-            path = os.path.join(a.figures, f"{name}_{f}.png")
-            figure(ours, a.rounds, key, first, xlabel, path)
-            what = {"fig1": "Figure 1: highest goal of the generated tasks",
-                    "fig2": "Figure 2: number of goals of the generated tasks"}[name]
-            md += [f"{what}:", "", f"![{what}]({path})", ""]
+        for key, fname, title, xlabel, first, log in FIGURES:
+            path = os.path.join(a.figures, f"{fname.split('_')[0]}_{f}.png")    # fig1_plain.png
+            per_round = [(k, [r["rounds"][k][key] for r in ours]) for k in range(a.rounds + 1)]
+            fig = histogram_figure(per_round, title, xlabel, first, log)
+            fig.savefig(path, dpi=DPI)
+            md += [f"{title}:", "", f"![{title}]({path})", ""]
         md += ["### Table 2: zero-shot success (ours)", "", *table2(ours, a.rounds, shapes), ""]
         if "direct-ppo" in by_variant:
             md += ["### Direct PPO on the evaluation tasks (sec 5.3; paper: 0%)", "",

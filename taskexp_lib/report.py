@@ -39,29 +39,54 @@ def tables(results):
     return "\n".join(["Table 1: generated tasks", *t1, "", "Table 2: zero-shot success", *t2])
 
 
-FIGURES = (("max_height_hist", "fig1_max_goal_height.png", "highest goal (layer, 0 = table)", 0),
-           ("goal_count_hist", "fig2_goal_count.png", "number of goals", 1))
+# (key in a round's record, file name, title, x label, first bin, log y axis); Figure 1 on a log
+# axis, where the few tasks that reach layers 2 and 3 -- what task expansion is about -- show
+FIGURES = (("max_height_hist", "fig1_max_goal_height.png",
+            "Figure 1: highest goal of the generated tasks", "highest goal (layer, 0 = table)", 0,
+            True),
+           ("goal_count_hist", "fig2_goal_count.png",
+            "Figure 2: goals per generated task", "number of goals", 1, False))
+DPI = 120
+
+
+def histogram_figure(per_round, title, xlabel, first_bin, log=False):
+    """One figure of the paper: per round, the fraction of the generated tasks in each bin.
+
+    per_round: [(round, histograms (seeds, bins))]; bars show the mean over the seeds and, for
+    more than one seed, their standard deviation as error bars. log: a log y axis.
+    Returns a matplotlib Figure (no pyplot: it works without a display).
+    """
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(6.4, 3.4))
+    ax = fig.add_subplot()
+    width = 0.8 / max(len(per_round), 1)
+    seeds = len(per_round[0][1]) if per_round else 1
+    for i, (k, hists) in enumerate(per_round):
+        h = np.asarray(hists, float)
+        share = h / np.maximum(h.sum(1, keepdims=True), 1)
+        x = np.arange(h.shape[1]) + first_bin + (i - (len(per_round) - 1) / 2) * width
+        ax.bar(x, share.mean(0), width, yerr=share.std(0) if seeds > 1 else None,
+               label=f"round {k}" + (" (base)" if k == 0 else ""))
+    if log:
+        ax.set_yscale("log")
+    ax.set_xticks(np.arange(len(per_round[0][1][0])) + first_bin if per_round else [])
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("fraction of the round's tasks" + (" (log)" if log else ""))
+    spread = f"mean over {seeds} seeds, error bars: std" if seeds > 1 else "one run"
+    ax.set_title(f"{title}\n({spread})", fontsize=10)
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))   # beside the bars
+    fig.tight_layout()
+    return fig
 
 
 def figures(results, out_dir):
-    """Figure 1 (maximum goal height) and Figure 2 (number of goals) per round, as PNG files:
-    the fraction of each round's generated tasks per bin, rounds side by side."""
-    from matplotlib.figure import Figure
+    """Figure 1 (highest goal) and Figure 2 (number of goals) of one run, per round, as PNG files
+    in out_dir -> their paths."""
     rounds = [r for r in results["rounds"] if "tasks" in r]
-    width = 0.8 / max(len(rounds), 1)
     paths = []
-    for key, fname, xlabel, first_bin in FIGURES:
-        fig = Figure(figsize=(5, 3.2))
-        ax = fig.add_subplot()
-        for i, r in enumerate(rounds):
-            h = np.array(r[key], float)
-            x = np.arange(len(h)) + first_bin + (i - (len(rounds) - 1) / 2) * width
-            label = f"round {r['round']}" + (" (base)" if r["round"] == 0 else "")
-            ax.bar(x, h / max(h.sum(), 1), width, label=label)
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("fraction of generated tasks")
-        ax.legend()
-        fig.tight_layout()
+    for key, fname, title, xlabel, first_bin, log in FIGURES:
+        fig = histogram_figure([(r["round"], [r[key]]) for r in rounds], title, xlabel,
+                               first_bin, log)
         paths.append(os.path.join(out_dir, fname))
-        fig.savefig(paths[-1], dpi=100)
+        fig.savefig(paths[-1], dpi=DPI)
     return paths

@@ -16,12 +16,15 @@ def test_reproduce_writes_the_report(tmp_path):
                     "--out", str(out), "--figures", str(figs)], check=True, cwd=tmp_path,
                    capture_output=True)
     text = out.read_text()
-    for part in ("### Targets", "### Table 1", "### Table 2", "### Direct PPO", "### Table 3",
-                 "## Where we differ from the paper"):
+    for part in ("### Targets", "### Does equation (1) pick goals", "### Table 1", "### Table 2",
+                 "### Direct PPO", "### Table 3", "## Where we differ from the paper"):
         assert part in text, part
     # one row per round of ours, with the paper's round-2 figures next to ours
     assert re.search(r"\| 2 \| .* \| 18 \| .* \| 5\.0 \|", text)
     assert "| round-2 mean over shapes >= 77%" in text
+    # the round-0 critic's leading indicator, measured on both seeds' checkpoints and kept
+    assert "| feasible among equation (1)'s picks, round-0 critic >= 75% |" in text
+    assert (tmp_path / "runs" / "ours-seed1" / "feasible_goals.json").exists()
     assert "after round 1" in text and "w/o restriction" in text
     for name in ("fig1_plain.png", "fig2_plain.png"):
         assert (figs / name).stat().st_size > 1000 and name in text

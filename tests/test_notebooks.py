@@ -84,3 +84,22 @@ def test_the_library_never_imports_from_notebooks():
     for path in glob.glob(os.path.join(ROOT, "*.py")):
         with open(path) as f:
             assert not re.search(r"^\s*(from|import)\s+notebooks", f.read(), re.M), path
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=os.path.basename)
+def test_notebook_writes_nothing_into_the_repository_docs(path):
+    """docs/ holds committed files: a notebook writes next to the runs or in a temporary folder."""
+    nb = nbformat.read(path, as_version=4)
+    code = [line.split("#")[0] for c in nb.cells if c.cell_type == "code"
+            for line in c.source.splitlines()]                      # without the comments
+    assert not [line for line in code if '"docs"' in line or "docs/" in line]
+
+
+def test_the_reader_sees_no_issue_numbers():
+    """What a reader sees says what was measured, not which work item asked for it."""
+    texts = {p: open(p, encoding="utf-8").read()
+             for p in [os.path.join(ROOT, "README.md"), os.path.join(ROOT, "RESULTS.md"),
+                       os.path.join(ROOT, "bench", "discussion.md"), *NOTEBOOKS]}
+    found = {os.path.basename(p): re.findall(r"issue [0-9]+", t, re.IGNORECASE)
+             for p, t in texts.items()}
+    assert not any(found.values()), found

@@ -214,3 +214,23 @@ def test_ppo_batch_returns_are_lambda_returns():
     assert (np.allclose(ret, expected)
             and np.allclose(adv, np.array(expected) - np.r_[t1.values, t2.values]))
     assert np.isclose(ret[2], 1.0) and np.isclose(ret[4], 0.0)      # success step; failed end
+
+
+def test_histogram_figure_shows_each_round_share_spread_and_title():
+    """Figure 1 of two seeds: each round's bars are its share of tasks per layer (mean over the
+    seeds, std as error bars), on a log axis, titled, the legend beside the axes."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    from taskexp_lib.report import histogram_figure
+    per_round = [(0, [[8, 2, 0], [6, 4, 0]]), (1, [[5, 4, 1], [5, 4, 1]])]
+    fig = histogram_figure(per_round, "Figure 1: test", "layer", 0, log=True)
+    ax = fig.axes[0]
+    heights = [p.get_height() for p in ax.patches]
+    assert np.allclose(heights, [0.7, 0.3, 0.0, 0.5, 0.4, 0.1])
+    assert ax.get_yscale() == "log" and "Figure 1: test" in ax.get_title()
+    assert "2 seeds" in ax.get_title()
+    bars = [c for c in ax.containers if hasattr(c, "patches")]
+    assert all(c.errorbar is not None for c in bars) and len(bars) == 2    # the seeds' std
+    renderer = FigureCanvasAgg(fig).get_renderer()
+    legend = ax.get_legend().get_window_extent(renderer)
+    assert legend.x0 >= ax.get_window_extent(renderer).x1                     # covers no bar
