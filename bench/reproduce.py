@@ -26,7 +26,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from run_seeds import DIRS, pm, run_one  # noqa: E402
+from run_seeds import pm, run_dir, run_one  # noqa: E402
 
 from taskexp_lib.config import Config  # noqa: E402
 from taskexp_lib.report import DPI, FIGURES, histogram_figure  # noqa: E402
@@ -212,8 +212,8 @@ def main():
         print(f"[{time.time() - start:5.0f}s] {f} {v} seed {s}", flush=True)
         results = run_one(v, s, rounds, root, extra)[2]
         if v == "ours":                   # the critic's leading indicator, on its round-0 copy
-            out = os.path.join(root, f"{DIRS.get(v, v)}-seed{s}")
-            results["feasible"] = feasibility(out, max(50, int(600 * float(a.scale or 1))))
+            results["feasible"] = feasibility(run_dir(v, s, root),
+                                              max(50, int(600 * float(a.scale or 1))))
         return job, results
 
     with ThreadPoolExecutor(a.jobs) as pool:

@@ -26,9 +26,14 @@ FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--
 DIRS = {"no-restrict": "ours-norestrict"}       # as taskexp.py names its default directories
 
 
+def run_dir(variant, seed, root):
+    """The folder of one run: root/<variant>-seed<k>, named as taskexp.py names its own."""
+    return os.path.join(root, f"{DIRS.get(variant, variant)}-seed{seed}")
+
+
 def run_one(variant, seed, rounds, root, extra_args):
     """Finished runs are reused, stopped ones resumed (same results as if never stopped)."""
-    out = os.path.join(root, f"{DIRS.get(variant, variant)}-seed{seed}")
+    out = run_dir(variant, seed, root)
     done = cli.saved_round(out)
     if done < rounds:
         cmd = [sys.executable, "-m", "taskexp_lib.cli", "--rounds", str(rounds), "--out", out,
