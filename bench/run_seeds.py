@@ -5,8 +5,8 @@
 
 Each run is a separate `taskexp.py` process (one worker: two runs at a time use the two cores)
 writing the directory `taskexp.py` would choose itself, runs/<variant>-seed<k> (no-restrict:
-runs/ours-norestrict-seed<k>), where the notebooks look for them. Prints a markdown table per
-variant and round.
+runs/ours-norestrict-seed<k>, no-labels: runs/ours-nolabels-seed<k>), where the notebooks look
+for them. Prints a markdown table per variant and round.
 """
 import argparse
 import json
@@ -20,10 +20,12 @@ import numpy as np
 from taskexp_lib import cli
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
-         "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"]}
+         "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"],
+         "no-labels": ["--label-tasks", "0"]}
 
 
-DIRS = {"no-restrict": "ours-norestrict"}       # as taskexp.py names its default directories
+# as taskexp.py names its default directories
+DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels"}
 
 
 def run_dir(variant, seed, root):

@@ -41,7 +41,8 @@ CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",
 MIN_ZERO = {"seed", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add",
             "label_tasks", "label_top", "label_pair"}
 AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
-SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes")
+SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes",
+          "label_tasks")
 RUN_FILES = ("results.json", "state.npz", "round*.npz")      # what a run leaves in its directory
 
 
@@ -165,8 +166,11 @@ def parse_args(argv=None):
     if not 0 < scale <= 100:
         p.error(f"--scale must be in (0, 100], got {scale}")
     for name in SCALED if scale != 1.0 else ():
-        setattr(cfg, name, max(4, int(round(getattr(cfg, name) * scale))))
+        budget = getattr(cfg, name)
+        if budget:                                  # label_tasks 0 (no labels) stays 0
+            setattr(cfg, name, max(4, int(round(budget * scale))))
     tag = cfg.baseline or f"{cfg.select}{'' if cfg.restrict else '-norestrict'}"
+    tag += "" if cfg.label_tasks else "-nolabels"
     tag += "" if cfg.n_blocks == Config.n_blocks else f"-{cfg.n_blocks}blocks"
     out = a.out or os.path.join("runs", f"{tag}-seed{cfg.seed}")
     found = sorted(f for pattern in RUN_FILES for f in glob.glob(os.path.join(glob.escape(out),

@@ -96,13 +96,14 @@ class Config:
     restrict: bool = True
     """sec 4.2: one alteration; False draws unrelated random tasks (Table 3 "w/o restriction")"""
 
-    label_tasks: int = 0
+    label_tasks: int = 2000
     """not in the paper: labelled outcomes as data for V(s, g) (taskexp_lib/labels.py), on this
-    many base tasks after the base PPO; 0 = off. The policy runs toward one-alteration candidates
-    from s_T and s_0 on the short budget, and V is regressed on the discounted outcomes"""
-    label_every_round: bool = False
-    """label_tasks: label after every round's self-distillation too, on the round's new tasks
-    (which the next task expansion starts from), not only after the base PPO"""
+    many tasks, after the base PPO; 0 = off (V learns from PPO alone, as in the paper). The policy
+    runs toward one-alteration candidates from s_T and s_0 on the short budget, and V is regressed
+    on the discounted outcomes"""
+    label_every_round: bool = True
+    """label_tasks: label before every later task expansion too, on the tasks it starts from (the
+    last round's new ones), not only after the base PPO"""
     label_per: int = 4
     """label_tasks: candidates labelled per successful trajectory"""
     label_top: int = 2

@@ -1,11 +1,18 @@
 """The reproduction report end to end at a tiny budget: bench/reproduce.py runs its variants,
-writes RESULTS.md with every table and the targets, and the figures it links to."""
+writes RESULTS.md with every table and the targets, and the figures it links to; the README's
+headline is what the runs kept in results/runs/ say (bench/headline.py)."""
+import dataclasses
+import json
 import os
 import re
 import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(ROOT, "bench"))
+import headline  # noqa: E402
+
+from taskexp_lib.config import Config  # noqa: E402
 
 
 def test_reproduce_writes_the_report(tmp_path):
@@ -31,3 +38,34 @@ def test_reproduce_writes_the_report(tmp_path):
     assert sorted(os.listdir(tmp_path / "runs")) == sorted(
         [f"{v}-seed{s}{ext}" for v in ("ours", "direct-ppo", "ours-norestrict") for s in (0, 1)
          for ext in ("", ".log")])
+    # the headline from two of these runs, kept, then written between a README's markers
+    kept = tmp_path / "kept"
+    headline.keep([tmp_path / "runs" / f"ours-seed{s}" for s in (0, 1)], kept=kept)
+    runs = headline.load("ours", kept=kept)
+    assert [r["config"]["seed"] for r in runs] == [0, 1] and "feasible" in runs[0]
+    readme = tmp_path / "README.md"
+    readme.write_text(f"intro\n{headline.BEGIN}\nold\n{headline.END}\nrest\n")
+    headline.write_readme(readme, headline.headline({"ours": runs}))
+    assert headline.readme_block(readme) == headline.headline({"ours": runs})
+    assert readme.read_text().startswith("intro\n") and readme.read_text().endswith("rest\n")
+
+
+def test_the_readme_headline_is_what_the_kept_runs_say():
+    """Every figure of the README's headline comes from results/runs/: edit one, and this fails."""
+    by_variant = {name: headline.load(name) for name, _ in headline.VARIANTS}
+    assert [r["config"]["seed"] for r in by_variant["ours"]] == [0, 1, 2]
+    defaults = json.loads(json.dumps(dataclasses.asdict(Config())))
+    assert all(r["config"] == {**defaults, "seed": r["config"]["seed"]}
+               for r in by_variant["ours"]), "the kept runs are not of the default settings"
+    assert headline.readme_block(os.path.join(ROOT, "README.md")) == headline.headline(by_variant)
+
+
+def test_what_the_readme_quotes_from_results_md_is_in_it():
+    """The README's paragraph on the full report quotes RESULTS.md: each figure must be there."""
+    with open(os.path.join(ROOT, "README.md")) as f:
+        readme = f.read()
+    with open(os.path.join(ROOT, "RESULTS.md")) as f:
+        results = f.read()
+    paragraph = readme.split("**The full report**", 1)[1].split("\n\n", 1)[0]
+    quoted = re.findall(r"\d+ \+- \d+%", paragraph)
+    assert quoted and all(q in results for q in quoted), quoted

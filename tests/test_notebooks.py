@@ -39,6 +39,16 @@ def test_notebook_is_small_and_has_the_quick_switch(path):
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=os.path.basename)
+def test_notebook_figures_are_sharp_and_saved_progress_bars_show_their_end(path):
+    nb = nbformat.read(path, as_version=4)
+    dpi = re.search(r'"figure.dpi": (\d+)', nb.cells[1].source)
+    assert dpi and int(dpi.group(1)) >= 100, "figures at 100 dpi or more"
+    widgets = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
+               if "application/vnd.jupyter.widget-view+json" in o.get("data", {})]
+    assert not widgets, "a saved progress widget reads 0% outside Jupyter: use text bars"
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=os.path.basename)
 def test_notebook_runs_in_quick_mode(path, monkeypatch, tmp_path):
     monkeypatch.setenv("TASKEXP_QUICK", "1")
     monkeypatch.setenv("TASKEXP_RUNS", str(tmp_path / "runs"))  # never read the repository's runs/

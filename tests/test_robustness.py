@@ -108,9 +108,12 @@ def test_every_config_field_is_a_flag():
     assert (cfg.ppo_steps, cfg.restrict, cfg.shapes, cfg.p_add) == (123, False, ("I", "Y"), 0.25)
 
 
-def test_blocks_flag_names_the_run_and_reaches_the_world(tmp_path):
+def test_blocks_flag_names_the_run_and_reaches_the_world(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)                     # runs/ here holds no run of these names
     cfg, out, *_ = cli.parse_args(["--blocks", "7"])
     assert cfg.n_blocks == 7 and out == os.path.join("runs", "ours-7blocks-seed0")
+    cfg, out, *_ = cli.parse_args(["--label-tasks", "0"])         # not the default run's folder
+    assert cfg.label_tasks == 0 and out == os.path.join("runs", "ours-nolabels-seed0")
 
 
 # ----------------------------------------------------------------------------- nothing lost

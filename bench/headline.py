@@ -1,0 +1,141 @@
+"""The README's headline: the default run over seeds, written from the runs it names.
+
+    python bench/headline.py --keep runs/ours-seed0 runs/ours-seed1 runs/ours-seed2
+    python bench/headline.py                    # print it from the kept copies
+    python bench/headline.py --readme README.md # and write it into the README between its markers
+
+--keep copies each finished run's results.json, with its round-0 critic's feasibility
+(bench/feasible_goals.py, 600 base tasks, measured once and cached in the run's folder) and the
+machine it ran on, to results/runs/<run>.json. Those copies are committed: the headline is made
+from them alone, and tests/test_bench.py checks that the README shows exactly what they say.
+"""
+import argparse
+import glob
+import json
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from reproduce import PAPER_T1, PAPER_T2, feasibility, machine, success, table1, table2  # noqa: E402
+from run_seeds import pm  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+KEPT = os.path.join(ROOT, "results", "runs")
+BEGIN = "<!-- headline: written by `python bench/headline.py --readme README.md` -->"
+END = "<!-- end of the headline -->"
+
+
+def keep(run_dirs, kept=KEPT, tasks=600):
+    """Copy finished runs (results.json + feasibility + machine) to kept/<run>.json."""
+    os.makedirs(kept, exist_ok=True)
+    for out in run_dirs:
+        with open(os.path.join(out, "results.json")) as f:
+            results = json.load(f)
+        if len(results["rounds"]) != results["config"]["rounds"] + 1:
+            raise SystemExit(f"{out}: not finished ({len(results['rounds']) - 1} of "
+                             f"{results['config']['rounds']} rounds)")
+        results.update(feasible=feasibility(out, tasks), machine=machine())
+        path = os.path.join(kept, os.path.basename(os.path.normpath(out)) + ".json")
+        with open(path, "w") as f:
+            json.dump(results, f, indent=1)
+        print("kept", os.path.relpath(path, ROOT))
+
+
+def load(name, kept=KEPT):
+    """The kept runs of one variant (ours, ours-nolabels), in seed order."""
+    runs = []
+    for path in glob.glob(os.path.join(kept, f"{name}-seed*.json")):
+        with open(path) as f:
+            runs.append(json.load(f))
+    configs = {json.dumps({k: v for k, v in r["config"].items() if k != "seed"}, sort_keys=True)
+               for r in runs}
+    if len(configs) > 1:
+        raise ValueError(f"the kept {name} runs differ in more than their seed")
+    return sorted(runs, key=lambda r: r["config"]["seed"])
+
+
+VARIANTS = (("ours", "the default"),
+            ("ours-nolabels", "`--label-tasks 0`: V(s, g) from PPO alone, as in the paper"))
+
+
+def headline(by_variant):
+    """The headline as markdown lines: the default next to the run without labelled outcomes,
+    each mean +- std over the seeds kept, then the default's Tables 1 and 2 round by round."""
+    ours = by_variant["ours"]
+    rounds, shapes = ours[0]["config"]["rounds"], list(ours[0]["config"]["shapes"])
+    earlier, every = range(1, rounds), " / ".join(map(str, range(1, rounds + 1)))
+    zero_shot = ["| zero-shot success |" + "".join(f" round {k} |" for k in earlier)
+                 + "".join(f" round {rounds}: {s} |" for s in shapes) + " mean over shapes |",
+                 "|---" * (2 + len(earlier) + len(shapes)) + "|"]
+    tasks = [f"| generated tasks | feasible among eq. (1)'s picks, round-0 critic | picks "
+             f"reached, rounds {every} | tasks with >= 3 goals above the ground, rounds {every} |",
+             "|---|---|---|---|"]
+    for name, label in VARIANTS:
+        runs = by_variant.get(name)
+        if not runs:
+            continue
+        cells = [pm([success(r, k) for r in runs], "%") for k in earlier]
+        cells += [pm([success(r, rounds, s) for r in runs], "%") for s in shapes]
+        zero_shot.append(f"| {label} | {' | '.join(cells)} | "
+                         f"**{pm([success(r, rounds) for r in runs], '%')}** |")
+        per_round = lambda of: " / ".join(f"{np.mean([of(r['rounds'][k]) for r in runs]):.0f}"
+                                          for k in range(1, rounds + 1))
+        feasible = pm([100 * r["feasible"]["feasible_picks"] for r in runs], "%")
+        tasks.append(f"| {label} | {feasible} | "
+                     f"{per_round(lambda w: 100 * w['expansion']['picks_reached'])} (%) | "
+                     f"{per_round(lambda w: w['high_goal_tasks'])} |")
+    paper = lambda k, s=None: (PAPER_T2[s][k - 1] if s else
+                               np.mean([PAPER_T2[s][k - 1] for s in shapes]))
+    zero_shot.append("| the paper (3D, ~150M PPO steps per round) |"
+                     + "".join(f" {paper(k):.0f}% |" for k in earlier)
+                     + "".join(f" {paper(rounds, s):.0f}% |" for s in shapes)
+                     + f" {paper(rounds):.0f}% |")
+    tasks.append(f"| the paper | - | - | {' / '.join(map(str, PAPER_T1['high_goal_tasks']))} |")
+    seeds = ", ".join(str(r["config"]["seed"]) for r in ours)
+    return [f"`python taskexp.py --rounds {rounds} --seed S`, seeds {seeds}, mean +- std over the "
+            f"seeds (the runs are kept in `results/runs/`; machine: {ours[0]['machine']}):", "",
+            *zero_shot, "", *tasks, "",
+            "The default, round by round: zero-shot success (Table 2) and the generated tasks "
+            "(Table 1).", "",
+            *table2(ours, rounds, shapes), "", *table1(ours, rounds)]
+
+
+def write_readme(path, lines):
+    """Replace the block between BEGIN and END in the README at `path` by `lines`."""
+    with open(path) as f:
+        text = f.read()
+    if BEGIN not in text or END not in text:
+        raise SystemExit(f"{path} has no headline markers ({BEGIN} ... {END})")
+    head, rest = text.split(BEGIN, 1)
+    with open(path, "w") as f:
+        f.write(head + "\n".join([BEGIN, "", *lines, "", END]) + rest.split(END, 1)[1])
+
+
+def readme_block(path):
+    """The lines between the markers of the README at `path` (what write_readme wrote)."""
+    with open(path) as f:
+        text = f.read()
+    return text.split(BEGIN, 1)[1].split(END, 1)[0].strip("\n").split("\n")
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--keep", nargs="+", metavar="RUN", help="finished run folders to keep first")
+    p.add_argument("--readme", help="write the headline into this README between its markers")
+    a = p.parse_args()
+    if a.keep:
+        keep(a.keep)
+    by_variant = {name: load(name) for name, _ in VARIANTS}
+    if not by_variant["ours"]:
+        raise SystemExit(f"no kept runs in {os.path.relpath(KEPT, ROOT)}: --keep RUN ... first")
+    lines = headline(by_variant)
+    print("\n".join(lines))
+    if a.readme:
+        write_readme(a.readme, lines)
+        print("wrote the headline into", a.readme)
+
+
+if __name__ == "__main__":
+    main()
