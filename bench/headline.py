@@ -5,9 +5,10 @@
     python bench/headline.py --readme README.md # and write it into the README between its markers
 
 --keep copies each finished run's results.json, with its round-0 critic's feasibility
-(bench/feasible_goals.py, 600 base tasks, measured once and cached in the run's folder) and the
-machine it ran on, to results/runs/<run>.json. Those copies are committed: the headline is made
-from them alone, and tests/test_bench.py checks that the README shows exactly what they say.
+(bench/feasible_goals.py, 600 base tasks, measured once and cached in the run's folder) and this
+machine's name (keep runs where they were made), to results/runs/<run>.json. Those copies are
+committed: the headline is made from them alone, and tests/test_bench.py checks that the README
+shows exactly what they say.
 """
 import argparse
 import glob
