@@ -419,15 +419,16 @@ class Pieces:
 def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, log=print):
     """One round k >= 1: task expansion from the last round's tasks (sec 4.2), then
     self-distillation on what it generated (sec 4.3). Updates `run`; returns the round's record.
-    With cfg.label_every_round, from round 2 on V first learns labelled outcomes of the tasks the
+    With cfg.label_later_tasks, from round 2 on V first learns labelled outcomes of the tasks the
     expansion starts from (round 1's critic learnt those of the base tasks in base_skills)."""
     log(f"[round {run.last_round + 1}] task expansion from {len(run.prev_tasks)} tasks")
     record = {}
-    if cfg.label_tasks and cfg.label_every_round and run.last_round > 0:
+    if cfg.label_tasks and cfg.label_later_tasks and run.last_round > 0:
         # equation (1) is about to ask V about one alteration of exactly these tasks. Labelled
         # here rather than after a round's distillation: after the last round none would ask
         record.update(labelled(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces,
-                               candidates, bar, log))
+                               candidates, bar, log, cfg.label_later_tasks,
+                               cfg.label_later_epochs))
     demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces, bar)
     stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
     unusable = info["successful"] - info["joined"] - info["relabelled"]

@@ -45,7 +45,7 @@ def keep(run_dirs, kept=KEPT, tasks=600):
 
 
 def load(name, kept=KEPT):
-    """The kept runs of one variant (ours, ours-nolabels), in seed order."""
+    """The kept runs of one variant (a name of VARIANTS), in seed order."""
     runs = []
     for path in glob.glob(os.path.join(kept, f"{name}-seed*.json")):
         with open(path) as f:
@@ -58,6 +58,8 @@ def load(name, kept=KEPT):
 
 
 VARIANTS = (("ours", "the default"),
+            ("ours-later1000", "`--label-later-tasks 1000 --label-later-epochs 6`: a sixth of "
+             "the later labelling"),
             ("ours-nolabels", "`--label-tasks 0`: V(s, g) from PPO alone, as in the paper"))
 
 
@@ -95,8 +97,14 @@ def headline(by_variant):
                      + f" {paper(rounds):.0f}% |")
     tasks.append(f"| the paper | - | - | {' / '.join(map(str, PAPER_T1['high_goal_tasks']))} |")
     seeds = ", ".join(str(r["config"]["seed"]) for r in ours)
+    made = {}                                                  # machine -> the runs made there
+    for name, _ in VARIANTS:
+        for m in sorted({r["machine"] for r in by_variant.get(name) or []}):
+            made.setdefault(m, []).append(f"`{name}-seedS`")
+    where = (f"machine: {next(iter(made))}" if len(made) == 1 else
+             "machines: " + "; ".join(f"{', '.join(runs)} on {m}" for m, runs in made.items()))
     return [f"`python taskexp.py --rounds {rounds} --seed S`, seeds {seeds}, mean +- std over the "
-            f"seeds (the runs are kept in `results/runs/`; machine: {ours[0]['machine']}):", "",
+            f"seeds (the runs are kept in `results/runs/`; {where}):", "",
             *zero_shot, "", *tasks, "",
             "The default, round by round: zero-shot success (Table 2) and the generated tasks "
             "(Table 1).", "",

@@ -39,10 +39,10 @@ CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",
            "shapes": tuple(SHAPES), "dtype": ("float32", "float64"),
            "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place")}
 MIN_ZERO = {"seed", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add",
-            "label_tasks", "label_top", "label_pair"}
+            "label_tasks", "label_later_tasks", "label_top", "label_pair"}
 AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
 SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes",
-          "label_tasks")
+          "label_tasks", "label_later_tasks")
 RUN_FILES = ("results.json", "state.npz", "round*.npz")      # what a run leaves in its directory
 
 

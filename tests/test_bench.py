@@ -1,6 +1,7 @@
 """The reproduction report end to end at a tiny budget: bench/reproduce.py runs its variants,
 writes RESULTS.md with every table and the targets, and the figures it links to; the README's
-headline is what the runs kept in results/runs/ say (bench/headline.py)."""
+headline is what the runs kept in results/runs/ say (bench/headline.py); bench/label_budget.py
+measures a labelling budget from one of its runs."""
 import dataclasses
 import json
 import os
@@ -48,6 +49,13 @@ def test_reproduce_writes_the_report(tmp_path):
     headline.write_readme(readme, headline.headline({"ours": runs}))
     assert headline.readme_block(readme) == headline.headline({"ours": runs})
     assert readme.read_text().startswith("intro\n") and readme.read_text().endswith("rest\n")
+    # a later round's labelling budget measured from a run's resume state, and none
+    for tasks in ("20", "0"):
+        printed = subprocess.run([sys.executable, os.path.join(ROOT, "bench", "label_budget.py"),
+                                  str(tmp_path / "runs" / "ours-seed0"), "--tasks", tasks,
+                                  "--epochs", "2", "--attempts", "20"], check=True,
+                                 capture_output=True, text=True).stdout
+        assert re.search(rf"{tasks} tasks labelled, 2 epochs: \d+ s; \d+% of \d+ picks", printed)
 
 
 def test_the_readme_headline_is_what_the_kept_runs_say():

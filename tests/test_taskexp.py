@@ -162,19 +162,26 @@ def test_top_candidates_follow_equation_1_and_outcomes_are_discounted():
 
 def test_labelled_outcomes_for_v_are_recorded_and_reproducible(tmp_path):
     """On by default: after the base PPO (round 0), then before every expansion but round 1's
-    (which round 0's labels serve), none after the last round; --scale shrinks them; 0 is off."""
-    flags = ("--rounds", "2", "--label-iters", "2", "--label-epochs", "2")
+    (which round 0's labels serve) with their own budget, none after the last round; --scale
+    shrinks them; 0 is off (--label-later-tasks 0: after the base PPO only)."""
+    flags = ("--rounds", "2", "--label-iters", "2", "--label-epochs", "2",
+             "--label-later-epochs", "6")
     runs = [run_cli(tmp_path / name, *flags) for name in ("a", "b")]
-    rounds = runs[0][1]["rounds"]
-    assert runs[0][1]["config"]["label_tasks"] == round(0.02 * taskexp.Config().label_tasks)
+    config, rounds = runs[0][1]["config"], runs[0][1]["rounds"]
+    assert config["label_tasks"] == round(0.02 * taskexp.Config().label_tasks)
+    assert config["label_later_tasks"] == round(0.02 * taskexp.Config().label_later_tasks)
     assert rounds[0]["label_runs"] > 0 and len(rounds[0]["label_loss"]) == 1
     assert 0 <= rounds[0]["label_success"] <= 1
     assert "label_runs" not in rounds[1] and rounds[2]["label_runs"] > 0
+    assert len(rounds[2]["label_loss"]) == 3                   # 6 later epochs over 2 iterations
     files = [open(os.path.join(out, "round2.npz"), "rb").read() for out, _ in runs]
     assert files[0] == files[1]
     _, off = run_cli(tmp_path / "off", "--label-tasks", "0")
     assert off["config"]["label_tasks"] == 0
     assert not any(k.startswith("label_") for r in off["rounds"] for k in r)
+    _, first = run_cli(tmp_path / "first", "--rounds", "2", "--label-later-tasks", "0")
+    assert "label_runs" in first["rounds"][0]
+    assert not any(k.startswith("label_") for r in first["rounds"][1:] for k in r)
 
 
 @pytest.mark.parametrize("flags, network, features, n_y", [
