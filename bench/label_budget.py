@@ -24,6 +24,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import taskexp  # noqa: E402
 from taskexp_lib import one_blas_thread  # noqa: E402
 from taskexp_lib.checkpoint import load_state  # noqa: E402
+from taskexp_lib.config import upgraded  # noqa: E402
 from taskexp_lib.labels import labelled  # noqa: E402
 from taskexp_lib.rollout import Worlds, physics_pool  # noqa: E402
 from taskexp_lib.shards import SHARDS  # noqa: E402
@@ -32,7 +33,7 @@ from taskexp_lib.shards import SHARDS  # noqa: E402
 def load(run_dir):
     """A run's settings, agent and RunState fields -> (cfg, agent, run); an error if unreadable."""
     with open(os.path.join(run_dir, "results.json")) as f:
-        saved = json.load(f)["config"]
+        saved = upgraded(json.load(f)["config"])
     cfg = taskexp.Config(**{**saved, "shapes": tuple(saved["shapes"])})
     agent, run = load_state(os.path.join(run_dir, "state.npz"), cfg, np.random.default_rng(),
                             taskexp.make_agent(cfg))

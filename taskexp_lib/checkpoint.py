@@ -14,7 +14,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from .config import Config
+from .config import Config, upgraded
 from .features import FEATURES
 from .geometry import GEOMETRY
 from .nets import NETWORKS
@@ -217,7 +217,7 @@ def load_state(path, cfg, rng, template):
     if int(data["state_version"]) != STATE_VERSION:
         raise ValueError(f"{path}: state_version {data['state_version']}, expected {STATE_VERSION}")
     results = json.loads(str(data["results"]))
-    ours, theirs = asdict(cfg), dict(results["config"])
+    ours, theirs = asdict(cfg), upgraded(results["config"])
     ours["shapes"], theirs["rounds"] = list(ours["shapes"]), ours["rounds"]   # rounds may grow
     if ours != theirs:
         diff = {k: (theirs.get(k), v) for k, v in ours.items() if theirs.get(k) != v}
@@ -246,6 +246,7 @@ def saved_results(out):
                 with np.load(path, allow_pickle=False) as z:
                     results = json.loads(str(z["results"]))
             results["rounds"][-1]["round"]           # a KeyError or IndexError: no round done
+            results["config"] = upgraded(results["config"])
             Config(**results["config"])              # a TypeError: not settings of this code
             return results, None
         except FileNotFoundError:

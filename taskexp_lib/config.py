@@ -136,3 +136,15 @@ class Config:
     """sec 5.3: "direct-ppo" replaces task expansion by PPO on the evaluation tasks"""
     shapes: tuple = ("I", "Y", "3T")
     """sec 5: the held-out shapes evaluated after every round"""
+
+
+def upgraded(settings):
+    """A run's saved settings (a dict) in today's field names, so that runs made by earlier code
+    still load and resume: label_every_round (until 2026-12-02) labelled the later rounds with
+    label_tasks and label_epochs, which is what label_later_tasks and label_later_epochs now say."""
+    settings = dict(settings)
+    if "label_every_round" in settings:
+        on = settings.pop("label_every_round")
+        settings.update(label_later_tasks=settings["label_tasks"] if on else 0,
+                        label_later_epochs=settings["label_epochs"])
+    return settings

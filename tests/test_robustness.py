@@ -167,6 +167,31 @@ def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
             and "state.npz: not a readable" in err[0])
 
 
+def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path):
+    """Settings saved before label_every_round became label_later_tasks and label_later_epochs
+    still resume (config.upgraded), to the results of a run never stopped."""
+    old, new = str(tmp_path / "old"), str(tmp_path / "new")
+    cli.main(["--rounds", "1", *TINY, "--out", old])
+
+    def as_before(settings):                       # the settings as the code before saved them
+        settings = dict(settings, label_every_round=settings["label_later_tasks"] > 0)
+        assert settings.pop("label_later_tasks") == settings["label_tasks"]
+        assert settings.pop("label_later_epochs") == settings["label_epochs"]
+        return settings
+    with open(os.path.join(old, "results.json")) as f:
+        results = json.load(f)
+    checkpoint.save_json(os.path.join(old, "results.json"),
+                         dict(results, config=as_before(results["config"])))
+    with np.load(os.path.join(old, "state.npz")) as z:
+        state = dict(z)
+    saved = json.loads(str(state["results"]))
+    state["results"] = np.array(json.dumps(dict(saved, config=as_before(saved["config"]))))
+    checkpoint.save_npz(os.path.join(old, "state.npz"), state)
+    cli.main(["--resume", "--rounds", "2", "--out", old])
+    cli.main(["--rounds", "2", *TINY, "--out", new])
+    assert results_without_clock(old) == results_without_clock(new)
+
+
 def test_any_number_of_workers_gives_the_same_bytes(tmp_path):
     """The physics runs in worker processes, every random draw in the main process: one worker or
     three, the results and the checkpoints are the same."""
