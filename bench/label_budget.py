@@ -12,7 +12,6 @@ that verification reaches (the leading indicator of selection). Every budget sta
 same state and seed, so budgets compare on the same tasks.
 """
 import argparse
-import json
 import os
 import sys
 import time
@@ -23,26 +22,29 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import taskexp  # noqa: E402
 from taskexp_lib import one_blas_thread  # noqa: E402
-from taskexp_lib.checkpoint import load_state  # noqa: E402
-from taskexp_lib.config import upgraded  # noqa: E402
+from taskexp_lib.checkpoint import load_state, saved_results  # noqa: E402
+from taskexp_lib.config import saved_config  # noqa: E402
 from taskexp_lib.labels import labelled  # noqa: E402
 from taskexp_lib.rollout import Worlds, physics_pool  # noqa: E402
 from taskexp_lib.shards import SHARDS  # noqa: E402
 
 
 def load(run_dir):
-    """A run's settings, agent and RunState fields -> (cfg, agent, run); an error if unreadable."""
-    with open(os.path.join(run_dir, "results.json")) as f:
-        saved = upgraded(json.load(f)["config"])
-    cfg = taskexp.Config(**{**saved, "shapes": tuple(saved["shapes"])})
+    """A run's settings, agent and RunState fields -> (cfg, agent, run); ValueError or OSError
+    naming what is wrong when the run cannot be read."""
+    results, why = saved_results(run_dir)
+    if results is None:
+        raise ValueError(why)
+    cfg = saved_config(results["config"])
     agent, run = load_state(os.path.join(run_dir, "state.npz"), cfg, np.random.default_rng(),
                             taskexp.make_agent(cfg))
     return cfg, agent, run
 
 
-def measure(run_dir, tasks, epochs, attempts=1000, seed=1, workers=2, log=print):
-    """Label with this budget, then expand -> dict with label_s, picks_reached and the counts."""
-    cfg, agent, run = load(run_dir)
+def measure(loaded, tasks, epochs, attempts=1000, seed=1, workers=2, log=print):
+    """Label with this budget the run `loaded` (load's triple), then expand -> dict with label_s,
+    picks_reached and the counts."""
+    cfg, agent, run = loaded
     agent.threads = min(workers, SHARDS)
     rng, cfg = np.random.default_rng(seed), replace(cfg, expand_episodes=attempts)
     with one_blas_thread(), physics_pool(workers, cfg.n_blocks, cfg.action == "drop") as pool:
@@ -70,10 +72,10 @@ def main():
     if not os.path.isfile(os.path.join(a.run, "state.npz")):
         p.error(f"{a.run} holds no state.npz: make a run there first (taskexp.py --out {a.run})")
     try:
-        load(a.run)
-    except (OSError, ValueError, TypeError, KeyError) as e:     # unreadable, or other settings
+        loaded = load(a.run)
+    except (OSError, ValueError) as e:                 # unreadable, or other settings
         p.error(f"{a.run}: cannot load this run ({type(e).__name__}: {e})")
-    m = measure(a.run, a.tasks, a.epochs, a.attempts, a.seed)
+    m = measure(loaded, a.tasks, a.epochs, a.attempts, a.seed)
     print(f"{a.run}: {a.tasks} tasks labelled, {a.epochs} epochs: {m['label_s']:.0f} s; "
           f"{m['picks_reached']:.0%} of {m['successful']} picks reached")
 

@@ -14,7 +14,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from .config import Config, upgraded
+from .config import saved_config, upgraded
 from .features import FEATURES
 from .geometry import GEOMETRY
 from .nets import NETWORKS
@@ -246,8 +246,7 @@ def saved_results(out):
                 with np.load(path, allow_pickle=False) as z:
                     results = json.loads(str(z["results"]))
             results["rounds"][-1]["round"]           # a KeyError or IndexError: no round done
-            results["config"] = upgraded(results["config"])
-            Config(**results["config"])              # a TypeError: not settings of this code
+            saved_config(results["config"])          # a TypeError: not settings of this code
             return results, None
         except FileNotFoundError:
             why.append(f"no {name}")

@@ -26,7 +26,7 @@ from taskexp import RunState
 
 from . import report
 from .checkpoint import load_state, save_json, save_state, saved_results
-from .config import Config
+from .config import Config, saved_config
 from .features import FEATURES
 from .nets import NETWORKS
 from .shapes import SHAPES
@@ -150,7 +150,7 @@ def parse_args(argv=None):
         if results is None:
             p.error(f"--resume: {a.out} holds no readable run ({why}); "
                     f"start a new run with --out {a.out} and no --resume")
-        cfg = Config(**{**results["config"], "shapes": tuple(results["config"]["shapes"])})
+        cfg = saved_config(results["config"])
         cfg.rounds = given.get("rounds", cfg.rounds)
         done = results["rounds"][-1]["round"]
         if done >= cfg.rounds:

@@ -148,3 +148,9 @@ def upgraded(settings):
         settings.update(label_later_tasks=settings["label_tasks"] if on else 0,
                         label_later_epochs=settings["label_epochs"])
     return settings
+
+
+def saved_config(settings):
+    """The Config of a run's settings as results.json saves them (shapes a list, upgraded)."""
+    settings = upgraded(settings)
+    return Config(**{**settings, "shapes": tuple(settings["shapes"])})
