@@ -3,6 +3,7 @@
     python bench/feasible_goals.py runs/ours-seed0/round0.npz
     python bench/feasible_goals.py runs/relations/ours-seed0/round0.npz
     python bench/feasible_goals.py runs/ours-seed0/round0.npz --json feasible.json
+    python bench/feasible_goals.py runs/end2new-seed0/round0.npz --select end2new
 
 Runs the checkpoint's policy on fresh base tasks (sec 4.1), and for every success s0 -> sT draws K
 one-alteration candidates and picks g* by equation (1), as task_expansion does. A candidate is
@@ -12,6 +13,8 @@ hand-computed relations (taskexp_lib.features.relations) only judge here; the ag
 have seen them. Prints the share of
 feasible goals among all candidates and among the chosen ones, and how often the verification
 run from sT (cfg.short_steps actions) reaches g*, for feasible and infeasible picks.
+--select and --no-restrict pick as the ablations of Table 3 do (bench/reproduce.py passes a run's
+own settings), so that each variant is judged on the goals it would pick.
 """
 import argparse
 import json
@@ -37,12 +40,13 @@ def feasible(state, goals):
     return rel["needs_support"].max() == 0 and rel["blocked"].max() == 0
 
 
-def measure(checkpoint, tasks=600, seed=5):
-    """The diagnostic for one checkpoint -> dict of the shares (0..1) and counts it prints."""
+def measure(checkpoint, tasks=600, seed=5, select="ours", restrict=True):
+    """The diagnostic for one checkpoint, picking by `select` among candidates drawn with or
+    without the restriction -> dict of the shares (0..1) and counts it prints."""
     agent = Agent.load(checkpoint)
     drop = taskexp.drops(agent)
     cfg = taskexp.Config(features=agent.feature_set, network=agent.network,
-                         action="drop" if drop else "place")
+                         action="drop" if drop else "place", select=select, restrict=restrict)
     rng = np.random.default_rng(seed)
     envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, drop=drop)
     short = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, drop=drop)
@@ -61,7 +65,8 @@ def measure(checkpoint, tasks=600, seed=5):
     reached = np.array([r.success for r in runs])
     picked = np.array([ok for _, ok in chosen])
     mean = lambda x: float(np.mean(x)) if len(x) else float("nan")
-    return dict(tasks=tasks, solved=len(found), candidates=cfg.candidates,
+    return dict(tasks=tasks, solved=len(found), candidates=cfg.candidates, select=select,
+                restrict=restrict,
                 feasible_candidates=mean(share), feasible_picks=mean(picked),
                 reached=mean(reached), reached_feasible=mean(reached[picked]),
                 reached_infeasible=mean(reached[~picked]))
@@ -72,15 +77,20 @@ def main():
     p.add_argument("checkpoint")
     p.add_argument("--tasks", type=int, default=600, help="base tasks to start from")
     p.add_argument("--seed", type=int, default=5)
+    p.add_argument("--select", choices=["ours", "end2new", "init2new"], default="ours",
+                   help="the selection rule: equation (1) or an ablation of Table 3")
+    p.add_argument("--no-restrict", dest="restrict", action="store_false",
+                   help="candidates without the one-alteration restriction (Table 3)")
     p.add_argument("--json", help="also write the figures to this file (bench/reproduce.py)")
     a = p.parse_args()
-    m = measure(a.checkpoint, a.tasks, a.seed)
+    m = measure(a.checkpoint, a.tasks, a.seed, a.select, a.restrict)
     if a.json:
         with open(a.json, "w") as f:
             json.dump(m, f, indent=1)
     pc = lambda key: f"{100 * m[key]:.0f}%"
+    rule = a.select + ("" if a.restrict else ", without the restriction")
     print(f"{a.checkpoint}: {m['solved']} of {m['tasks']} base tasks solved; "
-          f"K = {m['candidates']}")
+          f"K = {m['candidates']}; picks by {rule}")
     print(f"  feasible among all candidates  {pc('feasible_candidates')}")
     print(f"  feasible among the chosen g*   {pc('feasible_picks')}")
     print(f"  g* reached from sT: {pc('reached')} (feasible picks {pc('reached_feasible')}, "

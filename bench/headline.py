@@ -1,14 +1,17 @@
 """The README's headline: the default run over seeds, written from the runs it names.
 
     python bench/headline.py --keep runs/ours-seed0 runs/ours-seed1 runs/ours-seed2
+    python bench/run_seeds.py --rounds 1 --variants end2new no-restrict direct-ppo
+    python bench/run_seeds.py --rounds 3 --variants init2new
+    python bench/headline.py --keep runs/end2new-seed0 ...     # Table 3: the ablations
     python bench/headline.py                    # print it from the kept copies
     python bench/headline.py --readme README.md # and write it into the README between its markers
 
 --keep copies each finished run's results.json, with its round-0 critic's feasibility
-(bench/feasible_goals.py, 600 base tasks, measured once and cached in the run's folder) and this
-machine's name (keep runs where they were made), to results/runs/<run>.json. Those copies are
-committed: the headline is made from them alone, and tests/test_bench.py checks that the README
-shows exactly what they say.
+(bench/feasible_goals.py, 600 base tasks, with the run's own selection rule, measured once and
+cached in the run's folder) and this machine's name (keep runs where they were made), to
+results/runs/<run>.json. Those copies are committed: the headline is made from them alone, and
+tests/test_bench.py checks that the README shows exactly what they say.
 """
 import argparse
 import glob
@@ -19,8 +22,9 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from reproduce import PAPER_T1, PAPER_T2, feasibility, machine, success, table1, table2  # noqa: E402
-from run_seeds import pm  # noqa: E402
+import reproduce  # noqa: E402
+from reproduce import PAPER_T1, PAPER_T2, success, table1, table2, table3  # noqa: E402
+from run_seeds import DIRS, pm  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 KEPT = os.path.join(ROOT, "results", "runs")
@@ -37,7 +41,7 @@ def keep(run_dirs, kept=KEPT, tasks=600):
         if len(results["rounds"]) != results["config"]["rounds"] + 1:
             raise SystemExit(f"{out}: not finished ({len(results['rounds']) - 1} of "
                              f"{results['config']['rounds']} rounds)")
-        results.update(feasible=feasibility(out, tasks), machine=machine())
+        results.update(feasible=reproduce.feasibility(out, tasks), machine=reproduce.machine())
         path = os.path.join(kept, os.path.basename(os.path.normpath(out)) + ".json")
         with open(path, "w") as f:
             json.dump(results, f, indent=1)
@@ -57,10 +61,29 @@ def load(name, kept=KEPT):
     return sorted(runs, key=lambda r: r["config"]["seed"])
 
 
+def load_all(kept=KEPT):
+    """{name: its kept runs} for every variant of the headline and every ablation of Table 3."""
+    return {name: load(name, kept) for name in kept_names()}
+
+
 VARIANTS = (("ours", "the default"),
             ("ours-later1000", "`--label-later-tasks 1000 --label-later-epochs 6`: a sixth of "
              "the later labelling"),
-            ("ours-nolabels", "`--label-tasks 0`: V(s, g) from PPO alone, as in the paper"))
+            ("ours-nolabels", "`--label-tasks 0`: V(s, g) from PPO alone, as in the paper"),
+            ("init2new", "`--select init2new`: argmin V(s0, g), Table 3's ablation"))
+# Table 3's rows beside ours, each the default with one flag (run_seeds.FLAGS), kept as DIRS names
+# them (no-restrict: ours-norestrict-seedS)
+ABLATIONS = ("end2new", "init2new", "no-restrict", "direct-ppo")
+
+
+def kept_name(variant):
+    """The file prefix of a variant's kept runs: taskexp.py's name for its folder."""
+    return DIRS.get(variant, variant)
+
+
+def kept_names():
+    """The names of every kept run the headline reads: its rows, then Table 3's ablations."""
+    return list(dict.fromkeys([name for name, _ in VARIANTS] + [kept_name(v) for v in ABLATIONS]))
 
 
 def headline(by_variant):
@@ -72,8 +95,9 @@ def headline(by_variant):
     zero_shot = ["| zero-shot success |" + "".join(f" round {k} |" for k in earlier)
                  + "".join(f" round {rounds}: {s} |" for s in shapes) + " mean over shapes |",
                  "|---" * (2 + len(earlier) + len(shapes)) + "|"]
-    tasks = [f"| generated tasks | feasible among eq. (1)'s picks, round-0 critic | picks "
-             f"reached, rounds {every} | tasks with >= 3 goals above the ground, rounds {every} |",
+    tasks = [f"| generated tasks | feasible among the picks (eq. (1) or the row's rule), round-0 "
+             f"critic | picks reached, rounds {every} | tasks with >= 3 goals above the ground, "
+             f"rounds {every} |",
              "|---|---|---|---|"]
     for name, label in VARIANTS:
         runs = by_variant.get(name)
@@ -98,7 +122,7 @@ def headline(by_variant):
     tasks.append(f"| the paper | - | - | {' / '.join(map(str, PAPER_T1['high_goal_tasks']))} |")
     seeds = ", ".join(str(r["config"]["seed"]) for r in ours)
     made = {}                                                  # machine -> the runs made there
-    for name, _ in VARIANTS:
+    for name in kept_names():
         for m in sorted({r["machine"] for r in by_variant.get(name) or []}):
             made.setdefault(m, []).append(f"`{name}-seedS`")
     where = (f"machine: {next(iter(made))}" if len(made) == 1 else
@@ -108,7 +132,27 @@ def headline(by_variant):
             *zero_shot, "", *tasks, "",
             "The default, round by round: zero-shot success (Table 2) and the generated tasks "
             "(Table 1).", "",
-            *table2(ours, rounds, shapes), "", *table1(ours, rounds)]
+            *table2(ours, rounds, shapes), "", *table1(ours, rounds), *ablations(by_variant)]
+
+
+def ablations(by_variant):
+    """Table 3 as markdown lines (none without kept ablation runs): after each round the ablation
+    runs have, ours next to the ablations, each the default with one flag, over the same seeds."""
+    rows = {v: by_variant.get(kept_name(v)) for v in ABLATIONS}
+    rows = {"ours": by_variant["ours"], **{v: runs for v, runs in rows.items() if runs}}
+    if len(rows) == 1:
+        return []
+    shapes = list(by_variant["ours"][0]["config"]["shapes"])
+    rounds = {v: runs[0]["config"]["rounds"] for v, runs in rows.items() if v != "ours"}
+    seeds = ", ".join(str(r["config"]["seed"]) for r in rows["ours"])
+    out = ["", "Goal selection and the restriction (Table 3; the paper's is after round 1), and "
+           "PPO directly on the evaluation tasks from the same base policy with the same PPO "
+           "budget per round: `python taskexp.py --rounds R --seed S` with the flag of each row "
+           f"in `bench/run_seeds.py` (R: {', '.join(f'{v} {k}' for v, k in rounds.items())}), "
+           f"seeds {seeds}; ours are the runs above."]
+    for k in range(1, min(rounds.values()) + 1):
+        out += ["", *table3(rows, k, shapes)]
+    return out
 
 
 def write_readme(path, lines):
@@ -136,7 +180,7 @@ def main():
     a = p.parse_args()
     if a.keep:
         keep(a.keep)
-    by_variant = {name: load(name) for name, _ in VARIANTS}
+    by_variant = load_all()
     if not by_variant["ours"]:
         raise SystemExit(f"no kept runs in {os.path.relpath(KEPT, ROOT)}: --keep RUN ... first")
     lines = headline(by_variant)

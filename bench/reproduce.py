@@ -68,13 +68,17 @@ def picks_reached(rows):
 
 
 def feasibility(out, tasks):
-    """bench/feasible_goals.py on a run's round-0 critic: how many of equation (1)'s picks one
-    drop can meet. Kept in the run's folder, so a report written again reuses it."""
+    """bench/feasible_goals.py on a run's round-0 critic: how many of the goals its selection rule
+    picks (equation (1), or the run's ablation) one drop can meet. Kept in the run's folder, so a
+    report written again reuses it."""
     path = os.path.join(out, "feasible_goals.json")
     if not os.path.exists(path):
+        with open(os.path.join(out, "results.json")) as f:
+            cfg = json.load(f)["config"]
+        rule = ["--select", cfg["select"]] + ([] if cfg["restrict"] else ["--no-restrict"])
         script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "feasible_goals.py")
         subprocess.run([sys.executable, script, os.path.join(out, "round0.npz"), "--tasks",
-                        str(tasks), "--json", path], check=True, capture_output=True)
+                        str(tasks), "--json", path, *rule], check=True, capture_output=True)
     with open(path) as f:
         return json.load(f)
 
@@ -120,7 +124,7 @@ def table2(runs, rounds, shapes, with_paper=True):
 
 def table3(by_variant, k, shapes):
     out = [f"| after round {k} |" + "".join(f" {s} | paper |" for s in shapes)
-           + " mean | eq. (1) picks reached |", "|---" * (3 + 2 * len(shapes)) + "|"]
+           + " mean | its picks reached |", "|---" * (3 + 2 * len(shapes)) + "|"]
     for v, runs in by_variant.items():
         cells = "".join(f" {pm([success(r, k, s) for r in runs], '%')} | "
                         f"{PAPER_T3[v][i]:.1f}% |" for i, s in enumerate(shapes))

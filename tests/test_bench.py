@@ -12,7 +12,9 @@ import sys
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "bench"))
 import headline  # noqa: E402
+from run_seeds import FLAGS  # noqa: E402
 
+from taskexp_lib import cli  # noqa: E402
 from taskexp_lib.config import Config  # noqa: E402
 
 
@@ -44,10 +46,19 @@ def test_reproduce_writes_the_report(tmp_path):
     headline.keep([tmp_path / "runs" / f"ours-seed{s}" for s in (0, 1)], kept=kept)
     runs = headline.load("ours", kept=kept)
     assert [r["config"]["seed"] for r in runs] == [0, 1] and "feasible" in runs[0]
+    assert not any(line.startswith("| w/o restriction") for line in headline.headline(
+        {"ours": runs})), "Table 3 without kept ablations"
+    # an ablation kept too: judged by its own rule, and a row of Table 3
+    headline.keep([tmp_path / "runs" / f"ours-norestrict-seed{s}" for s in (0, 1)], kept=kept)
+    by_variant = headline.load_all(kept=kept)
+    assert by_variant["ours-norestrict"][1]["feasible"]["restrict"] is False
+    assert runs[1]["feasible"]["restrict"] is True
+    lines = headline.headline(by_variant)
+    assert sum(line.startswith("| w/o restriction |") for line in lines) == 1
     readme = tmp_path / "README.md"
     readme.write_text(f"intro\n{headline.BEGIN}\nold\n{headline.END}\nrest\n")
-    headline.write_readme(readme, headline.headline({"ours": runs}))
-    assert headline.readme_block(readme) == headline.headline({"ours": runs})
+    headline.write_readme(readme, lines)
+    assert headline.readme_block(readme) == lines
     assert readme.read_text().startswith("intro\n") and readme.read_text().endswith("rest\n")
     # a later round's labelling budget measured from a run's resume state, and none
     for tasks in ("20", "0"):
@@ -60,11 +71,20 @@ def test_reproduce_writes_the_report(tmp_path):
 
 def test_the_readme_headline_is_what_the_kept_runs_say():
     """Every figure of the README's headline comes from results/runs/: edit one, and this fails."""
-    by_variant = {name: headline.load(name) for name, _ in headline.VARIANTS}
+    by_variant = headline.load_all()
     assert [r["config"]["seed"] for r in by_variant["ours"]] == [0, 1, 2]
     defaults = json.loads(json.dumps(dataclasses.asdict(Config())))
     assert all(r["config"] == {**defaults, "seed": r["config"]["seed"]}
                for r in by_variant["ours"]), "the kept runs are not of the default settings"
+    for variant in headline.ABLATIONS:            # Table 3: the default with one flag
+        runs = by_variant[headline.kept_name(variant)]
+        assert [r["config"]["seed"] for r in runs] in ([], [0, 1, 2]), variant
+        for r in runs:
+            seed = str(r["config"]["seed"])
+            rounds = str(r["config"]["rounds"])
+            argv = ["--rounds", rounds, "--seed", seed, *FLAGS[variant], "--out", "unused"]
+            made = json.loads(json.dumps(dataclasses.asdict(cli.parse_args(argv).cfg)))
+            assert r["config"] == made, f"{variant} seed {seed} is not the default with its flag"
     assert headline.readme_block(os.path.join(ROOT, "README.md")) == headline.headline(by_variant)
 
 
