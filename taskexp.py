@@ -38,7 +38,7 @@ from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, obser
 from taskexp_lib.labels import labelled
 from taskexp_lib.nn import mlp_backward
 from taskexp_lib.report import task_stats
-from taskexp_lib.rollout import Trajectory, Worlds, physics_pool, run_episodes, success_rate
+from taskexp_lib.rollout import Trajectory, physics_pool, run_episodes, run_worlds, success_rate
 from taskexp_lib.shapes import eval_tasks
 from taskexp_lib.shards import SHARDS, read_only_map
 
@@ -473,8 +473,7 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
     drop = cfg.action == "drop"
     agent.threads = min(workers, SHARDS)      # both cores on every minibatch (the same results)
     with one_blas_thread(), physics_pool(workers, cfg.n_blocks, drop) as pool:
-        envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool, drop)
-        short_envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool, drop)
+        envs, short_envs = run_worlds(cfg, pool)
         evals = eval_tasks(cfg, envs[0])
         for k in range(run.last_round + 1, cfg.rounds + 1):
             with phase(f"round {k}"):

@@ -29,7 +29,7 @@ from agent import Agent  # noqa: E402
 from taskexp_lib import one_blas_thread  # noqa: E402
 from taskexp_lib.features import relations  # noqa: E402
 from taskexp_lib.geometry import THRESHOLD, observation  # noqa: E402
-from taskexp_lib.rollout import Worlds, run_episodes  # noqa: E402
+from taskexp_lib.rollout import run_episodes, run_worlds  # noqa: E402
 
 
 def feasible(state, goals):
@@ -48,8 +48,7 @@ def measure(checkpoint, tasks=600, seed=5, select="ours", restrict=True):
     cfg = taskexp.Config(features=agent.feature_set, network=agent.network,
                          action="drop" if drop else "place", select=select, restrict=restrict)
     rng = np.random.default_rng(seed)
-    envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, drop=drop)
-    short = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, drop=drop)
+    envs, short = run_worlds(cfg)
     base, _, _ = taskexp.base_demos(cfg, envs[0], rng, tasks)
     found = [t for t in run_episodes(agent, base, envs, rng, values=False) if t.success]
     share, chosen = [], []

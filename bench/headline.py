@@ -41,7 +41,8 @@ def keep(run_dirs, kept=KEPT, tasks=600):
         if len(results["rounds"]) != results["config"]["rounds"] + 1:
             raise SystemExit(f"{out}: not finished ({len(results['rounds']) - 1} of "
                              f"{results['config']['rounds']} rounds)")
-        results.update(feasible=reproduce.feasibility(out, tasks), machine=reproduce.machine())
+        results.update(feasible=reproduce.feasibility(out, results["config"], tasks),
+                       machine=reproduce.machine())
         path = os.path.join(kept, os.path.basename(os.path.normpath(out)) + ".json")
         with open(path, "w") as f:
             json.dump(results, f, indent=1)
@@ -49,7 +50,7 @@ def keep(run_dirs, kept=KEPT, tasks=600):
 
 
 def load(name, kept=KEPT):
-    """The kept runs of one variant (a name of VARIANTS), in seed order."""
+    """The kept runs of one name of kept_names(), in seed order."""
     runs = []
     for path in glob.glob(os.path.join(kept, f"{name}-seed*.json")):
         with open(path) as f:

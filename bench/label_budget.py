@@ -25,7 +25,7 @@ from taskexp_lib import one_blas_thread  # noqa: E402
 from taskexp_lib.checkpoint import load_state, saved_results  # noqa: E402
 from taskexp_lib.config import saved_config  # noqa: E402
 from taskexp_lib.labels import labelled  # noqa: E402
-from taskexp_lib.rollout import Worlds, physics_pool  # noqa: E402
+from taskexp_lib.rollout import physics_pool, run_worlds  # noqa: E402
 from taskexp_lib.shards import SHARDS  # noqa: E402
 
 
@@ -48,8 +48,7 @@ def measure(loaded, tasks, epochs, attempts=1000, seed=1, workers=2, log=print):
     agent.threads = min(workers, SHARDS)
     rng, cfg = np.random.default_rng(seed), replace(cfg, expand_episodes=attempts)
     with one_blas_thread(), physics_pool(workers, cfg.n_blocks, cfg.action == "drop") as pool:
-        envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool, cfg.action == "drop")
-        short = Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool, cfg.action == "drop")
+        envs, short = run_worlds(cfg, pool)
         start = time.time()
         if tasks:
             labelled(agent, run["prev_tasks"], cfg, envs, short, rng, taskexp.Pieces(),

@@ -67,14 +67,13 @@ def picks_reached(rows):
     return "-" if None in shares else pm([100 * s for s in shares], "%")
 
 
-def feasibility(out, tasks):
-    """bench/feasible_goals.py on a run's round-0 critic: how many of the goals its selection rule
-    picks (equation (1), or the run's ablation) one drop can meet. Kept in the run's folder, so a
-    report written again reuses it."""
+def feasibility(out, cfg, tasks):
+    """bench/feasible_goals.py on the round-0 critic of the run in `out` (settings cfg, as its
+    results.json saves them): how many of the goals its selection rule picks (equation (1), or
+    the run's ablation) one drop can meet. Kept in the run's folder, so a report written again
+    reuses it."""
     path = os.path.join(out, "feasible_goals.json")
     if not os.path.exists(path):
-        with open(os.path.join(out, "results.json")) as f:
-            cfg = json.load(f)["config"]
         rule = ["--select", cfg["select"]] + ([] if cfg["restrict"] else ["--no-restrict"])
         script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "feasible_goals.py")
         subprocess.run([sys.executable, script, os.path.join(out, "round0.npz"), "--tasks",
@@ -216,7 +215,7 @@ def main():
         print(f"[{time.time() - start:5.0f}s] {f} {v} seed {s}", flush=True)
         results = run_one(v, s, rounds, root, extra)[2]
         if v == "ours":                   # the critic's leading indicator, on its round-0 copy
-            results["feasible"] = feasibility(run_dir(v, s, root),
+            results["feasible"] = feasibility(run_dir(v, s, root), results["config"],
                                               max(50, int(600 * float(a.scale or 1))))
         return job, results
 

@@ -72,6 +72,14 @@ class Worlds(list):
         self.pool = pool
 
 
+def run_worlds(cfg, pool=None):
+    """The worlds of a run with settings cfg -> (envs, short_envs): cfg.n_envs each, episodes of
+    cfg.max_steps actions, and of cfg.short_steps for verification, labels and stretch tasks."""
+    drop = cfg.action == "drop"
+    return (Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool, drop),
+            Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool, drop))
+
+
 @dataclass
 class Trajectory:
     """One episode. states (T+1, n, 6), actions (T, 3); logp and values (T,) from the sampler."""
