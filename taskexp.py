@@ -315,28 +315,30 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
         found = [t for t in run_episodes(agent, batch, envs, rng, bar=progress, values=False)
                  if t.success]
     asked = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
-    # equation (1) draws nothing at random, so both cores share the trajectories
-    pick = lambda ag, job: pieces.select_goal(ag, job[0].states[0], job[0].states[-1], job[1],
-                                              cfg.select)
-    picks = read_only_map(agent, pick, list(zip(found, asked)), agent.threads)
-    chosen = [cands[i] for cands, i in zip(asked, picks)]
-    onward = [(traj.states[-1], goals) for traj, goals in zip(found, chosen)]
+    chosen, rules = [], (cfg.select, "init2new") if cfg.hard_picks else (cfg.select,)
+    for rule in rules:      # equation (1) draws nothing at random: both cores share the work
+        pick = lambda ag, job, rule=rule: pieces.select_goal(ag, job[0].states[0],
+                                                             job[0].states[-1], job[1], rule)
+        picks = read_only_map(agent, pick, list(zip(found, asked)), agent.threads)
+        chosen += [cands[i] for cands, i in zip(asked, picks)]
+    starts = found * len(rules)                     # cfg.hard_picks: each trajectory twice
+    onward = [(traj.states[-1], goals) for traj, goals in zip(starts, chosen)]
     with bar(total=len(onward), desc="verify") as progress:
         verified = run_episodes(agent, onward, short_envs, rng, bar=progress, values=False)
-    demos, n_joined = [], 0
-    for traj, goals, more in zip(found, chosen, verified):
+    demos, reached = [], [more.success for more in verified]
+    for traj, goals, more in zip(starts, chosen, verified):
         joined = join(traj, more, goals, more.success)
         if more.success:
             demos.append(joined)
-            n_joined += 1
         else:
             relabelled = pieces.relabel(joined, env)
             if relabelled is not None:
                 demos.append(relabelled)
     # picks_reached: the share of equation (1)'s picks that the policy reaches from s_T, the
     # leading indicator of whether V(s, g) tells a reachable goal from an unreachable one
-    info = dict(attempts=len(batch), successful=len(found), joined=n_joined,
-                relabelled=len(demos) - n_joined, picks_reached=n_joined / max(len(found), 1))
+    info = dict(attempts=len(batch), successful=len(found), joined=sum(reached),
+                relabelled=len(demos) - sum(reached),
+                picks_reached=sum(reached[:len(found)]) / max(len(found), 1))
     return demos, info
 
 
@@ -431,9 +433,10 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
                                cfg.label_later_epochs))
     demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces, bar)
     stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
-    unusable = info["successful"] - info["joined"] - info["relabelled"]
-    log(f"  {info['attempts']} attempts, {info['successful']} successful: {info['joined']} joined, "
-        f"{info['relabelled']} relabelled, {unusable} unusable "
+    runs = info["successful"] * (2 if cfg.hard_picks else 1)      # verification runs from s_T
+    unusable = runs - info["joined"] - info["relabelled"]
+    log(f"  {info['attempts']} attempts, {info['successful']} successful, {runs} runs from s_T: "
+        f"{info['joined']} joined, {info['relabelled']} relabelled, {unusable} unusable "
         f"({info['picks_reached']:.0%} of the picks reached); "
         f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
     record["expansion"] = info

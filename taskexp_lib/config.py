@@ -95,6 +95,10 @@ class Config:
     """sec 4.2: goal selection, ours (eq. 1) | end2new | init2new (Table 3 ablations)"""
     restrict: bool = True
     """sec 4.2: one alteration; False draws unrelated random tasks (Table 3 "w/o restriction")"""
+    hard_picks: bool = False
+    """not in the paper: each s_T is also run toward init2new's pick, argmin V(s0, g), the
+    candidate hardest from s_0. Almost always relabelled, these runs show blocks moved under and
+    onto others, which the one-drop extensions that equation (1) picks never show"""
 
     label_tasks: int = 2000
     """not in the paper: labelled outcomes as data for V(s, g) (taskexp_lib/labels.py), on this
@@ -138,11 +142,17 @@ class Config:
     """sec 5: the held-out shapes evaluated after every round"""
 
 
+# Fields added since runs were first kept, each with the value that does what the code before it
+# did: a run saved without the field resumes with that value
+ADDED = {"hard_picks": False}                       # 2026-12-02
+
+
 def upgraded(settings):
     """A run's saved settings (a dict) in today's field names, so that runs made by earlier code
     still load and resume: label_every_round (until 2026-12-02) labelled the later rounds with
-    label_tasks and label_epochs, which is what label_later_tasks and label_later_epochs now say."""
-    settings = dict(settings)
+    label_tasks and label_epochs, which is what label_later_tasks and label_later_epochs now say;
+    a field of ADDED that the run does not have takes its value there."""
+    settings = {**ADDED, **settings}
     if "label_every_round" in settings:
         on = settings.pop("label_every_round")
         settings.update(label_later_tasks=settings["label_tasks"] if on else 0,

@@ -168,8 +168,9 @@ def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
 
 
 def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path):
-    """Settings saved before label_every_round became label_later_tasks and label_later_epochs
-    still resume (config.upgraded), to the results of a run never stopped."""
+    """Settings saved before label_every_round became label_later_tasks and label_later_epochs,
+    and before hard_picks existed, still resume (config.upgraded), to the results of a run never
+    stopped."""
     old, new = str(tmp_path / "old"), str(tmp_path / "new")
     cli.main(["--rounds", "1", *TINY, "--out", old])
 
@@ -177,6 +178,7 @@ def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path):
         settings = dict(settings, label_every_round=settings["label_later_tasks"] > 0)
         assert settings.pop("label_later_tasks") == settings["label_tasks"]
         assert settings.pop("label_later_epochs") == settings["label_epochs"]
+        assert settings.pop("hard_picks") is False
         return settings
     with open(os.path.join(old, "results.json")) as f:
         results = json.load(f)

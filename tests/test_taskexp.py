@@ -137,6 +137,18 @@ def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
     assert os.path.exists(os.path.join(out, "fig1_max_goal_height.png"))
 
 
+def test_hard_picks_also_verify_the_goal_hardest_from_s0(tmp_path):
+    """--hard-picks runs each successful trajectory toward two goals, equation (1)'s and
+    init2new's: as many trajectories collected as without it, up to twice the demos."""
+    runs = {name: run_cli(tmp_path / name, *flags)[1]["rounds"][1]["expansion"]
+            for name, flags in (("one", []), ("two", ["--hard-picks"]))}
+    one, two = runs["one"], runs["two"]
+    assert (one["attempts"], one["successful"]) == (two["attempts"], two["successful"])
+    assert one["joined"] + one["relabelled"] <= one["successful"]
+    assert one["successful"] < two["joined"] + two["relabelled"] <= 2 * two["successful"]
+    assert two["picks_reached"] <= min(1, two["joined"] / two["successful"])
+
+
 def test_same_seed_same_results_different_seed_different(tmp_path):
     runs = [run_cli(tmp_path / name, "--seed", seed)
             for name, seed in (("a", "3"), ("b", "3"), ("c", "4"))]
