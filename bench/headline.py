@@ -14,7 +14,6 @@ results/runs/<run>.json. Those copies are committed: the headline is made from t
 tests/test_bench.py checks that the README shows exactly what they say.
 """
 import argparse
-import glob
 import json
 import os
 import sys
@@ -24,10 +23,9 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import reproduce  # noqa: E402
 from reproduce import PAPER_T1, PAPER_T2, success, table1, table2, table3  # noqa: E402
-from run_seeds import DIRS, pm  # noqa: E402
+from run_seeds import DIRS, KEPT, load, pm  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-KEPT = os.path.join(ROOT, "results", "runs")
 BEGIN = "<!-- headline: written by `python bench/headline.py --readme README.md` -->"
 END = "<!-- end of the headline -->"
 
@@ -49,19 +47,6 @@ def keep(run_dirs, kept=KEPT, tasks=600):
         print("kept", os.path.relpath(path, ROOT))
 
 
-def load(name, kept=KEPT):
-    """The kept runs of one name of kept_names(), in seed order."""
-    runs = []
-    for path in glob.glob(os.path.join(kept, f"{name}-seed*.json")):
-        with open(path) as f:
-            runs.append(json.load(f))
-    configs = {json.dumps({k: v for k, v in r["config"].items() if k != "seed"}, sort_keys=True)
-               for r in runs}
-    if len(configs) > 1:
-        raise ValueError(f"the kept {name} runs differ in more than their seed")
-    return sorted(runs, key=lambda r: r["config"]["seed"])
-
-
 def load_all(kept=KEPT):
     """{name: its kept runs} for every variant of the headline and every ablation of Table 3."""
     return {name: load(name, kept) for name in kept_names()}
@@ -71,7 +56,8 @@ VARIANTS = (("ours", "the default"),
             ("ours-later1000", "`--label-later-tasks 1000 --label-later-epochs 6`: a sixth of "
              "the later labelling"),
             ("ours-nolabels", "`--label-tasks 0`: V(s, g) from PPO alone, as in the paper"),
-            ("init2new", "`--select init2new`: argmin V(s0, g), Table 3's ablation"))
+            ("init2new", "`--select init2new`: argmin V(s0, g), Table 3's ablation"),
+            ("ours-hard", "`--hard-picks`: from each s_T, init2new's pick verified as well"))
 # Table 3's rows beside ours, each the default with one flag (run_seeds.FLAGS), kept as DIRS names
 # them (no-restrict: ours-norestrict-seedS)
 ABLATIONS = ("end2new", "init2new", "no-restrict", "direct-ppo")

@@ -2,6 +2,7 @@
 
     python bench/reproduce.py                     # 3 seeds, both feature sets: writes RESULTS.md
     python bench/reproduce.py --seeds 0 --features plain --scale 0.2     # a quick look
+    python bench/reproduce.py --features plain --kept    # from the runs kept in results/runs/
 
 Runs the method ("ours"), the direct-PPO baseline and the ablations of Table 3 (end2new, init2new,
 w/o restriction; for --ablation-rounds, default 1: the paper's Table 3 is after round 1) with the
@@ -10,6 +11,8 @@ once with the hand-computed relations (--features relations).
 Each run is one `taskexp.py` process through bench/run_seeds.py: finished runs are reused and
 stopped ones resumed, so a stopped report goes on where it was. Runs of the default features go
 to runs/<variant>-seed<k> (where the notebooks look), the others to runs/<features>/...
+--kept reads the runs' results.json as bench/headline.py --keep copied them instead (the README's
+headline comes from the same copies).
 Writes RESULTS.md (mean +- std over seeds, the targets checked against them, the
 machine and the wall-clock time), its figures in results/, and appends bench/discussion.md, the
 team's reading of the numbers, which is written by hand.
@@ -26,7 +29,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from run_seeds import pm, run_dir, run_one  # noqa: E402
+from run_seeds import DIRS, KEPT, load, pm, run_dir, run_one  # noqa: E402
 
 from taskexp_lib.config import Config  # noqa: E402
 from taskexp_lib.report import DPI, FIGURES, histogram_figure  # noqa: E402
@@ -196,6 +199,9 @@ def main():
     p.add_argument("--root", default="runs")
     p.add_argument("--jobs", type=int, default=2, help="runs at a time (one core each)")
     p.add_argument("--scale", default=None, help="passed to taskexp.py (smaller budgets)")
+    p.add_argument("--kept", nargs="?", const=KEPT, metavar="DIR",
+                   help="write the report from the runs kept in DIR (default results/runs/, "
+                        "where bench/headline.py --keep copies them) instead of making them")
     p.add_argument("--out", default="RESULTS.md")
     p.add_argument("--figures", default="results", help="folder for the figures")
     a = p.parse_args()
@@ -205,6 +211,16 @@ def main():
     shapes = list(Config.shapes)
     start = time.time()
     jobs = [(f, v, s) for f in a.features for v in a.variants for s in a.seeds]
+
+    def kept(job):
+        f, v, s = job
+        runs = {r["config"]["seed"]: r for r in load(DIRS.get(v, v), a.kept)}
+        rounds = a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
+        r = runs.get(s)
+        if r is None or r["config"]["features"] != f or len(r["rounds"]) <= rounds:
+            raise SystemExit(f"{a.kept} keeps no {f} {v} run of seed {s} with {rounds} rounds: "
+                             f"make it (bench/run_seeds.py) and keep it (bench/headline.py)")
+        return job, r
 
     def one(job):
         f, v, s = job
@@ -219,14 +235,19 @@ def main():
                                               max(50, int(600 * float(a.scale or 1))))
         return job, results
 
-    with ThreadPoolExecutor(a.jobs) as pool:
-        done = dict(pool.map(one, jobs))
+    if a.kept:
+        done = dict(map(kept, jobs))
+    else:
+        with ThreadPoolExecutor(a.jobs) as pool:
+            done = dict(pool.map(one, jobs))
     seeds = " ".join(map(str, a.seeds))
     cmd = "python bench/reproduce.py " + " ".join(sys.argv[1:])
+    where = (f"the runs kept in `{os.path.relpath(a.kept)}/`, each made on the machine it names: "
+             + "; ".join(sorted({r["machine"] for r in done.values()})) if a.kept else machine())
     md = ["# Reproduction report", "",
           f"Written by `{cmd.strip()}` on {time.strftime('%Y-%m-%d')}: the default settings "
           f"(`python taskexp.py --rounds {a.rounds}`" + (f" --scale {a.scale}" if a.scale else "")
-          + f"), seeds {seeds}, every figure mean +- std over the seeds. Machine: {machine()}. "
+          + f"), seeds {seeds}, every figure mean +- std over the seeds. Machine: {where}. "
           "Results differ between machines (BLAS kernels differ), so compare spreads, not one "
           "seed's digits.", ""]
     for f in a.features:
@@ -236,7 +257,8 @@ def main():
         title = {"plain": "self-attention over plain features (the default)",
                  "relations": "hand-computed relations (--features relations)"}[f]
         md += [f"## {title}", "",
-               "Wall-clock per run, seconds (two runs at a time, one worker each): "
+               "Wall-clock per run, seconds ("
+               + ("as each was made" if a.kept else "two runs at a time, one worker each") + "): "
                + ", ".join(f"{v} {c}" for v, c in clock.items()) + ".", "",
                "### Targets", "", *targets(by_variant, a.rounds, shapes), "",
                "### Does equation (1) pick goals the policy can reach?", "",
@@ -259,9 +281,9 @@ def main():
         for k in sorted({1, min(a.rounds, a.ablation_rounds)}):
             md += [*table3(by_variant, k, shapes), ""]
     runs_s = sum(r["wallclock"]["total_s"] for r in done.values())
-    md += [f"The {len(done)} runs took {runs_s:.0f} s of wall-clock in all, run {a.jobs} at a "
-           f"time; this invocation took {time.time() - start:.0f} s (finished runs are reused).",
-           ""]
+    md += [f"The {len(done)} runs took {runs_s:.0f} s of wall-clock in all, "
+           + ("as they were made." if a.kept else f"run {a.jobs} at a time; this invocation took "
+              f"{time.time() - start:.0f} s (finished runs are reused)."), ""]
     notes = os.path.join(os.path.dirname(os.path.abspath(__file__)), "discussion.md")
     if os.path.exists(notes):
         with open(notes) as fh:

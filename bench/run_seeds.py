@@ -9,6 +9,7 @@ runs/ours-norestrict-seed<k>, no-labels: runs/ours-nolabels-seed<k>), where the 
 for them. Prints a markdown table per variant and round.
 """
 import argparse
+import glob
 import json
 import os
 import subprocess
@@ -21,11 +22,13 @@ from taskexp_lib import cli
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"],
-         "no-labels": ["--label-tasks", "0"]}
+         "no-labels": ["--label-tasks", "0"], "hard-picks": ["--hard-picks"]}
 
 
+# finished runs' results.json, copied by bench/headline.py --keep and committed
+KEPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "results", "runs")
 # as taskexp.py names its default directories
-DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels"}
+DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels", "hard-picks": "ours-hard"}
 
 
 def run_dir(variant, seed, root):
@@ -45,6 +48,19 @@ def run_one(variant, seed, rounds, root, extra_args):
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
     with open(os.path.join(out, "results.json")) as f:
         return variant, seed, json.load(f)
+
+
+def load(name, kept=KEPT):
+    """The kept runs of one name (a run folder's, without -seedK), in seed order."""
+    runs = []
+    for path in glob.glob(os.path.join(kept, f"{name}-seed*.json")):
+        with open(path) as f:
+            runs.append(json.load(f))
+    configs = {json.dumps({k: v for k, v in r["config"].items() if k != "seed"}, sort_keys=True)
+               for r in runs}
+    if len(configs) > 1:
+        raise ValueError(f"the kept {name} runs differ in more than their seed")
+    return sorted(runs, key=lambda r: r["config"]["seed"])
 
 
 def main():

@@ -2,8 +2,6 @@
 writes RESULTS.md with every table and the targets, and the figures it links to; the README's
 headline is what the runs kept in results/runs/ say (bench/headline.py); bench/label_budget.py
 measures a labelling budget from one of its runs."""
-import dataclasses
-import json
 import os
 import re
 import subprocess
@@ -15,7 +13,7 @@ import headline  # noqa: E402
 from run_seeds import FLAGS  # noqa: E402
 
 from taskexp_lib import cli  # noqa: E402
-from taskexp_lib.config import Config  # noqa: E402
+from taskexp_lib.config import Config, saved_config  # noqa: E402
 
 
 def test_reproduce_writes_the_report(tmp_path):
@@ -60,6 +58,19 @@ def test_reproduce_writes_the_report(tmp_path):
     headline.write_readme(readme, lines)
     assert headline.readme_block(readme) == lines
     assert readme.read_text().startswith("intro\n") and readme.read_text().endswith("rest\n")
+    # the report written again from the kept copies: the same tables; a run not kept is named
+    report = [sys.executable, os.path.join(ROOT, "bench", "reproduce.py"), "--seeds", "0", "1",
+              "--features", "plain", "--rounds", "2", "--kept", str(kept), "--out",
+              str(tmp_path / "K.md"), "--figures", str(figs), "--variants", "ours", "no-restrict"]
+    subprocess.run(report, check=True, cwd=tmp_path, capture_output=True)
+
+    def tables(md):                        # every table row but direct PPO's, not kept here
+        parts = [part for part in md.split("\n### ") if not part.startswith("Direct PPO")]
+        return [ln for part in parts for ln in part.split("\n")
+                if ln.startswith("|") and "direct PPO" not in ln]
+    assert tables((tmp_path / "K.md").read_text()) == tables(text)
+    missing = subprocess.run(report + ["direct-ppo"], cwd=tmp_path, capture_output=True, text=True)
+    assert missing.returncode != 0 and "keeps no plain direct-ppo run of seed 0" in missing.stderr
     # a later round's labelling budget measured from a run's resume state, and none
     for tasks in ("20", "0"):
         printed = subprocess.run([sys.executable, os.path.join(ROOT, "bench", "label_budget.py"),
@@ -73,19 +84,33 @@ def test_the_readme_headline_is_what_the_kept_runs_say():
     """Every figure of the README's headline comes from results/runs/: edit one, and this fails."""
     by_variant = headline.load_all()
     assert [r["config"]["seed"] for r in by_variant["ours"]] == [0, 1, 2]
-    defaults = json.loads(json.dumps(dataclasses.asdict(Config())))
-    assert all(r["config"] == {**defaults, "seed": r["config"]["seed"]}
+    # read as --resume reads a run's settings: a field added since a run was made has its default
+    assert all(saved_config(r["config"]) == Config(seed=r["config"]["seed"])
                for r in by_variant["ours"]), "the kept runs are not of the default settings"
-    for variant in headline.ABLATIONS:            # Table 3: the default with one flag
+    for variant in (*headline.ABLATIONS, "hard-picks"):        # the default with one flag
         runs = by_variant[headline.kept_name(variant)]
         assert [r["config"]["seed"] for r in runs] in ([], [0, 1, 2]), variant
         for r in runs:
             seed = str(r["config"]["seed"])
             rounds = str(r["config"]["rounds"])
             argv = ["--rounds", rounds, "--seed", seed, *FLAGS[variant], "--out", "unused"]
-            made = json.loads(json.dumps(dataclasses.asdict(cli.parse_args(argv).cfg)))
-            assert r["config"] == made, f"{variant} seed {seed} is not the default with its flag"
+            made = cli.parse_args(argv).cfg
+            assert saved_config(r["config"]) == made, f"{variant} seed {seed}: not its flag alone"
     assert headline.readme_block(os.path.join(ROOT, "README.md")) == headline.headline(by_variant)
+
+
+def test_results_md_is_what_the_kept_runs_say(tmp_path):
+    """RESULTS.md is written from results/runs/ (reproduce.py --kept): written again, its tables
+    and its discussion are the same; edit a figure of either, and this fails."""
+    out = tmp_path / "R.md"
+    subprocess.run([sys.executable, os.path.join(ROOT, "bench", "reproduce.py"), "--features",
+                    "plain", "--kept", "--out", str(out), "--figures", str(tmp_path)],
+                   check=True, cwd=ROOT, capture_output=True)
+    with open(os.path.join(ROOT, "RESULTS.md")) as f:
+        committed = f.read().split("\n")
+    again = out.read_text().split("\n")
+    assert committed[0] == again[0] and committed[3:] == [
+        line.replace(str(tmp_path), "results") for line in again[3:]]
 
 
 def test_what_the_readme_quotes_from_results_md_is_in_it():
