@@ -4,9 +4,9 @@
     python bench/run_seeds.py --seeds 0 1 2 --variants ours direct-ppo end2new init2new no-restrict
 
 Each run is a separate `taskexp.py` process (one worker: two runs at a time use the two cores)
-writing the directory `taskexp.py` would choose itself, runs/<variant>-seed<k> (no-restrict:
-runs/ours-norestrict-seed<k>, no-labels: runs/ours-nolabels-seed<k>), where the notebooks look
-for them. Prints a markdown table per variant and round.
+writing runs/<variant>-seed<k>, or the directory DIRS names (no-restrict:
+runs/ours-norestrict-seed<k>, as `taskexp.py` would name it itself), where the notebooks look for
+them. Prints a markdown table per variant and round.
 """
 import argparse
 import glob
@@ -22,13 +22,15 @@ from taskexp_lib import cli
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"],
-         "no-labels": ["--label-tasks", "0"], "hard-picks": ["--hard-picks"]}
+         "no-labels": ["--label-tasks", "0"], "hard-picks": ["--hard-picks"],
+         "expand6000": ["--expand-episodes", "6000"]}
 
 
 # finished runs' results.json, copied by bench/headline.py --keep and committed
 KEPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "results", "runs")
 # as taskexp.py names its default directories
-DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels", "hard-picks": "ours-hard"}
+DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels", "hard-picks": "ours-hard",
+        "expand6000": "ours-expand6000"}
 
 
 def run_dir(variant, seed, root):
