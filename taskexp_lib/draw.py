@@ -22,7 +22,8 @@ def rgb_array(canvas):
 
 def draw_scene(ax, state, goals=None, title=None):
     """Draw a state (n, 6) on a matplotlib Axes: the table, blocks with their ids, goals as dashed
-    outlines in their block's colour. Fixed limits, so frames of an episode line up. Returns ax."""
+    outlines in their block's colour. Fixed limits, so frames of an episode line up; axes in
+    metres. Returns ax."""
     n = len(state)
     ax.add_patch(Rectangle((TABLE_X[0], -0.05), TABLE_X[1] - TABLE_X[0], 0.05, color="0.55"))
     for b, (x, y) in (goals or {}).items():
@@ -36,6 +37,9 @@ def draw_scene(ax, state, goals=None, title=None):
     ax.set_xlim(TABLE_X[0] - 0.05, TABLE_X[1] + 0.05)
     ax.set_ylim(-0.05, n * BLOCK_H + 0.1)
     ax.set_aspect("equal")
+    # the unit on every tick (axis labels would run into the titles below in a grid of scenes)
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(lambda v, _: f"{round(v, 3) + 0.0:.1f} m")     # no "-0.0"
     if title:
         ax.set_title(title)
     return ax

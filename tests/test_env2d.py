@@ -293,6 +293,8 @@ def test_render_and_draw_scene():
     assert BlockWorld(6).render() is None
     ax = draw_scene(Figure().add_subplot(), env.get_state(), env.goals, title="t")
     assert ax.get_ylim() == (-0.05, 6 * BLOCK_H + 0.1) and ax.get_title() == "t"
+    ticks = [axis.get_major_formatter() for axis in (ax.xaxis, ax.yaxis)]
+    assert [f(0.2, 0) for f in ticks] == ["0.2 m"] * 2 and ticks[0](-1e-17, 0) == "0.0 m"
 
 
 def test_observation_and_is_success_helpers():
