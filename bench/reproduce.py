@@ -211,12 +211,14 @@ def main():
     shapes = list(Config.shapes)
     start = time.time()
     jobs = [(f, v, s) for f in a.features for v in a.variants for s in a.seeds]
+    rounds_of = lambda v: a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
+    # --kept: each variant's kept runs read once, by seed
+    by_seed = {v: {r["config"]["seed"]: r for r in load(DIRS.get(v, v), a.kept)}
+               for v in a.variants} if a.kept else {}
 
     def kept(job):
         f, v, s = job
-        runs = {r["config"]["seed"]: r for r in load(DIRS.get(v, v), a.kept)}
-        rounds = a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
-        r = runs.get(s)
+        r, rounds = by_seed[v].get(s), rounds_of(v)
         if r is None or r["config"]["features"] != f or len(r["rounds"]) <= rounds:
             raise SystemExit(f"{a.kept} keeps no {f} {v} run of seed {s} with {rounds} rounds: "
                              f"make it (bench/run_seeds.py) and keep it (bench/headline.py)")
@@ -227,9 +229,8 @@ def main():
         root = a.root if f == Config.features else os.path.join(a.root, f)
         os.makedirs(root, exist_ok=True)
         extra = ["--features", f] + (["--scale", a.scale] if a.scale else [])
-        rounds = a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
         print(f"[{time.time() - start:5.0f}s] {f} {v} seed {s}", flush=True)
-        results = run_one(v, s, rounds, root, extra)[2]
+        results = run_one(v, s, rounds_of(v), root, extra)[2]
         if v == "ours":                   # the critic's leading indicator, on its round-0 copy
             results["feasible"] = feasibility(run_dir(v, s, root), results["config"],
                                               max(50, int(600 * float(a.scale or 1))))
