@@ -6,7 +6,7 @@
 Prints:
 1. the default run (`python taskexp.py --rounds 3`, all cores): wall time in all and per round,
    CPU utilisation (user + system time of the main process and its physics workers / wall
-   time), peak memory;
+   time), peak memory, and its time by phase of the method (PHASES);
 2. the share of physics, network forward/backward and everything else, measured with timers
    around BlockWorld.simulate and the networks in a --scale 0.25 run with one worker and one
    thread (the physics in the main process, so that it can be timed);
@@ -32,6 +32,7 @@ import numpy as np
 
 import env2d
 import taskexp
+from agent import Agent
 from taskexp_lib import cli, nn, one_blas_thread
 from taskexp_lib.config import Config
 from taskexp_lib.nets import NETWORKS
@@ -75,6 +76,35 @@ class Timer:
 
     def restore(self):
         setattr(self.cls, self.name, self.inner)
+
+
+# The method's phases, timed around the calls that make them; a phase's inner calls are counted
+# on their own line: {line: (its timers, the lines it holds)}
+PHASES = {"base demos (sec 4.1)": ([(taskexp, "base_demos")], ()),
+          "behaviour cloning (BC)": ([(Agent, "bc")], ()),
+          "PPO: rollouts": ([(taskexp, "ppo_phase")], ("PPO: updates",)),
+          "PPO: updates": ([(Agent, "ppo_update")], ()),
+          "labels: runs, ranking": ([(taskexp, "labelled")], ("labels: value fits",)),
+          "labels: value fits": ([(Agent, "fit_value"), (Agent, "fit_value_pairs")], ()),
+          "task expansion (sec 4.2)": ([(taskexp, "task_expansion")], ()),
+          "zero-shot evaluation": ([(taskexp, "evaluate")], ())}
+
+
+def by_phase(cfg, workers, out):
+    """timed_run with a timer around each of PHASES -> (its figures, {line: seconds}), the
+    seconds of a line without those of the lines it holds; "the rest" is the time outside."""
+    timers = {line: [Timer(*where) for where in wheres] for line, (wheres, _) in PHASES.items()}
+    try:
+        total, per_round, cpu = timed_run(cfg, workers, out)
+    finally:
+        for ts in timers.values():
+            for t in ts:
+                t.restore()
+    spent = {line: sum(t.total for t in ts) for line, ts in timers.items()}
+    for line, (_, inner) in PHASES.items():
+        spent[line] -= sum(spent[i] for i in inner)
+    spent["the rest (checkpoints, bookkeeping)"] = total - sum(spent.values())
+    return (total, per_round, cpu), spent
 
 
 def shares(cfg, out):
@@ -195,13 +225,15 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         if not a.skip_full:
             out = os.path.join(tmp, "full")
-            total, per_round, cpu = timed_run(cfg, workers, out)
+            (total, per_round, cpu), spent = by_phase(cfg, workers, out)
             rounds = ", ".join(f"{k}: {s:.0f} s" for k, s in per_round.items())
             with open(os.path.join(out, "results.json")) as f:
                 memory = json.load(f)["wallclock"]["peak_memory_mb"]
             print(f"\n1. default run, --workers {workers}: {total:.0f} s ({rounds}); CPU "
                   f"utilisation {cpu:.2f} of {workers} cores; peak memory of the main process "
-                  f"{memory} MB")
+                  f"{memory} MB; by phase:")
+            for name, s in spent.items():
+                print(f"   {name:36s} {s:6.0f} s  {100 * s / total:4.0f}%")
         small = cli.parse_args(["--rounds", "1", "--scale", "0.25", "--out", "unused"]).cfg
         total, spent = shares(small, os.path.join(tmp, "shares"))
         print(f"\n2. where the time goes (--rounds 1 --scale 0.25, one process, one thread): "

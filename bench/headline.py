@@ -59,7 +59,9 @@ VARIANTS = (("ours", "the default"),
             ("init2new", "`--select init2new`: argmin V(s0, g), Table 3's ablation"),
             ("ours-hard", "`--hard-picks`: from each s_T, init2new's pick verified as well"),
             ("ours-expand6000", "`--expand-episodes 6000`: as many runs from s_T as "
-             "`--hard-picks`, all toward equation (1)'s picks"))
+             "`--hard-picks`, all toward equation (1)'s picks"),
+            ("ours-relations", "`--features relations`: the stacking relations computed by hand "
+             "as features"))
 # Table 3's rows beside ours, each the default with one flag (run_seeds.FLAGS), kept as DIRS names
 # them (no-restrict: ours-norestrict-seedS)
 ABLATIONS = ("end2new", "init2new", "no-restrict", "direct-ppo")

@@ -2,7 +2,7 @@
 
     python bench/reproduce.py                     # 3 seeds, both feature sets: writes RESULTS.md
     python bench/reproduce.py --seeds 0 --features plain --scale 0.2     # a quick look
-    python bench/reproduce.py --features plain --kept    # from the runs kept in results/runs/
+    python bench/reproduce.py --kept          # from the runs kept in results/runs/
 
 Runs the method ("ours"), the direct-PPO baseline and the ablations of Table 3 (end2new, init2new,
 w/o restriction; for --ablation-rounds, default 1: the paper's Table 3 is after round 1) with the
@@ -12,7 +12,8 @@ Each run is one `taskexp.py` process through bench/run_seeds.py: finished runs a
 stopped ones resumed, so a stopped report goes on where it was. Runs of the default features go
 to runs/<variant>-seed<k> (where the notebooks look), the others to runs/<features>/...
 --kept reads the runs' results.json as bench/headline.py --keep copied them instead (the README's
-headline comes from the same copies).
+headline comes from the same copies), named as taskexp.py names its folders (ours-relations-seedK
+for the relations); a feature set other than the default may be kept for ours alone.
 Writes RESULTS.md (mean +- std over seeds, the targets checked against them, the
 machine and the wall-clock time), its figures in results/, and appends bench/discussion.md, the
 team's reading of the numbers, which is written by hand.
@@ -212,13 +213,17 @@ def main():
     start = time.time()
     jobs = [(f, v, s) for f in a.features for v in a.variants for s in a.seeds]
     rounds_of = lambda v: a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
-    # --kept: each variant's kept runs read once, by seed
-    by_seed = {v: {r["config"]["seed"]: r for r in load(DIRS.get(v, v), a.kept)}
-               for v in a.variants} if a.kept else {}
+    # --kept: each variant's kept runs read once, by seed, named as taskexp.py names its folders
+    # (the relations' runs: ours-relations-seedK)
+    kept_name = lambda f, v: DIRS.get(v, v) + ("" if f == Config.features else f"-{f}")
+    by_seed = {(f, v): {r["config"]["seed"]: r for r in load(kept_name(f, v), a.kept)}
+               for f in a.features for v in a.variants} if a.kept else {}
+    if a.kept:        # the other feature set may be kept for fewer variants: report those
+        jobs = [(f, v, s) for f, v, s in jobs if f == Config.features or by_seed[f, v]]
 
     def kept(job):
         f, v, s = job
-        r, rounds = by_seed[v].get(s), rounds_of(v)
+        r, rounds = by_seed[f, v].get(s), rounds_of(v)
         if r is None or r["config"]["features"] != f or len(r["rounds"]) <= rounds:
             raise SystemExit(f"{a.kept} keeps no {f} {v} run of seed {s} with {rounds} rounds: "
                              f"make it (bench/run_seeds.py) and keep it (bench/headline.py)")
@@ -252,7 +257,11 @@ def main():
           "Results differ between machines (BLAS kernels differ), so compare spreads, not one "
           "seed's digits.", ""]
     for f in a.features:
-        by_variant = {v: [done[(f, v, s)] for s in a.seeds] for v in a.variants}
+        by_variant = {v: [done[(f, v, s)] for s in a.seeds] for v in a.variants
+                      if (f, v, a.seeds[0]) in done}
+        if not by_variant:
+            print(f"{a.kept} keeps no {f} runs: RESULTS.md leaves them out")
+            continue
         ours = by_variant["ours"]
         clock = {v: pm([r["wallclock"]["total_s"] for r in runs]) for v, runs in by_variant.items()}
         title = {"plain": "self-attention over plain features (the default)",
@@ -278,6 +287,8 @@ def main():
         if "direct-ppo" in by_variant:
             md += ["### Direct PPO on the evaluation tasks (sec 5.3; paper: 0%)", "",
                    *table2(by_variant["direct-ppo"], a.rounds, shapes, with_paper=False), ""]
+        if len(by_variant) == 1:                          # ours alone: no ablation kept
+            continue
         md += ["### Table 3: goal selection and the restriction", ""]
         for k in sorted({1, min(a.rounds, a.ablation_rounds)}):
             md += [*table3(by_variant, k, shapes), ""]

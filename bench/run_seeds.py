@@ -23,14 +23,16 @@ from taskexp_lib import cli
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"],
          "no-labels": ["--label-tasks", "0"], "hard-picks": ["--hard-picks"],
-         "expand6000": ["--expand-episodes", "6000"]}
+         "expand6000": ["--expand-episodes", "6000"], "relations": ["--features", "relations"],
+         "hard-expand6000": ["--hard-picks", "--expand-episodes", "6000"]}
 
 
 # finished runs' results.json, copied by bench/headline.py --keep and committed
 KEPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "results", "runs")
 # as taskexp.py names its default directories
 DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels", "hard-picks": "ours-hard",
-        "expand6000": "ours-expand6000"}
+        "expand6000": "ours-expand6000", "relations": "ours-relations",
+        "hard-expand6000": "ours-hard-expand6000"}
 
 
 def run_dir(variant, seed, root):

@@ -172,6 +172,7 @@ def parse_args(argv=None):
     tag = cfg.baseline or f"{cfg.select}{'' if cfg.restrict else '-norestrict'}"
     tag += "" if cfg.label_tasks else "-nolabels"
     tag += "-hard" if cfg.hard_picks else ""
+    tag += "" if cfg.features == Config.features else f"-{cfg.features}"
     tag += "" if cfg.n_blocks == Config.n_blocks else f"-{cfg.n_blocks}blocks"
     out = a.out or os.path.join("runs", f"{tag}-seed{cfg.seed}")
     found = sorted(f for pattern in RUN_FILES for f in glob.glob(os.path.join(glob.escape(out),

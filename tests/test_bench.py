@@ -1,7 +1,8 @@
 """The reproduction report end to end at a tiny budget: bench/reproduce.py runs its variants,
 writes RESULTS.md with every table and the targets, and the figures it links to; the README's
 headline is what the runs kept in results/runs/ say (bench/headline.py); bench/label_budget.py
-measures a labelling budget from one of its runs."""
+measures a labelling budget from one of its runs; bench/bench_speed.py times every phase of a
+run."""
 import os
 import re
 import subprocess
@@ -9,10 +10,12 @@ import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "bench"))
+import bench_speed  # noqa: E402
 import headline  # noqa: E402
 from run_seeds import FLAGS  # noqa: E402
 
-from taskexp_lib import cli  # noqa: E402
+import taskexp  # noqa: E402
+from taskexp_lib import cli, one_blas_thread  # noqa: E402
 from taskexp_lib.config import Config, saved_config  # noqa: E402
 
 
@@ -87,7 +90,7 @@ def test_the_readme_headline_is_what_the_kept_runs_say():
     # read as --resume reads a run's settings: a field added since a run was made has its default
     assert all(saved_config(r["config"]) == Config(seed=r["config"]["seed"])
                for r in by_variant["ours"]), "the kept runs are not of the default settings"
-    for variant in (*headline.ABLATIONS, "hard-picks", "expand6000"):  # the default, one flag
+    for variant in (*headline.ABLATIONS, "hard-picks", "expand6000", "relations"):  # one flag
         runs = by_variant[headline.kept_name(variant)]
         assert [r["config"]["seed"] for r in runs] in ([], [0, 1, 2]), variant
         for r in runs:
@@ -103,8 +106,8 @@ def test_results_md_is_what_the_kept_runs_say(tmp_path):
     """RESULTS.md is written from results/runs/ (reproduce.py --kept): written again, its tables
     and its discussion are the same; edit a figure of either, and this fails."""
     out = tmp_path / "R.md"
-    subprocess.run([sys.executable, os.path.join(ROOT, "bench", "reproduce.py"), "--features",
-                    "plain", "--kept", "--out", str(out), "--figures", str(tmp_path)],
+    subprocess.run([sys.executable, os.path.join(ROOT, "bench", "reproduce.py"), "--kept",
+                    "--out", str(out), "--figures", str(tmp_path)],
                    check=True, cwd=ROOT, capture_output=True)
     with open(os.path.join(ROOT, "RESULTS.md")) as f:
         committed = f.read().split("\n")
@@ -122,3 +125,15 @@ def test_what_the_readme_quotes_from_results_md_is_in_it():
     paragraph = readme.split("**The full report**", 1)[1].split("\n\n", 1)[0]
     quoted = re.findall(r"\d+ \+- \d+%", paragraph)
     assert quoted and all(q in results for q in quoted), quoted
+
+
+def test_bench_speed_accounts_for_every_phase(tmp_path):
+    """bench/bench_speed.py's time by phase: every phase of a tiny run is timed, none twice (what
+    is left of the wall time for the rest is positive), and the run's code is restored after."""
+    cfg = cli.parse_args(["--rounds", "2", "--scale", "0.01", "--out", "unused"]).cfg
+    before = taskexp.labelled
+    with one_blas_thread():
+        (_, per_round, _), spent = bench_speed.by_phase(cfg, 1, str(tmp_path / "run"))
+    assert taskexp.labelled is before
+    assert list(per_round) == [0, 1, 2]
+    assert all(s > 0 for s in spent.values()), spent      # the rest too: nothing counted twice

@@ -114,6 +114,8 @@ def test_blocks_flag_names_the_run_and_reaches_the_world(tmp_path, monkeypatch):
     assert cfg.n_blocks == 7 and out == os.path.join("runs", "ours-7blocks-seed0")
     cfg, out, *_ = cli.parse_args(["--label-tasks", "0"])         # not the default run's folder
     assert cfg.label_tasks == 0 and out == os.path.join("runs", "ours-nolabels-seed0")
+    cfg, out, *_ = cli.parse_args(["--features", "relations"])
+    assert cfg.features == "relations" and out == os.path.join("runs", "ours-relations-seed0")
 
 
 # ----------------------------------------------------------------------------- nothing lost
