@@ -46,6 +46,11 @@ def test_notebook_figures_are_sharp_and_saved_progress_bars_show_their_end(path)
     widgets = [o for c in nb.cells if c.cell_type == "code" for o in c.outputs
                if "application/vnd.jupyter.widget-view+json" in o.get("data", {})]
     assert not widgets, "a saved progress widget reads 0% outside Jupyter: use text bars"
+    overwritten = [c.source[:40] for c in nb.cells if c.cell_type == "code" for o in c.outputs
+                   if o.output_type == "stream" and "\r" in o.text]
+    assert not overwritten, ("a saved text bar keeps every update (0% first) in viewers without "
+                             "a terminal: jupyter nbconvert --to notebook --coalesce-streams "
+                             f"--inplace {os.path.relpath(path, ROOT)}; cells {overwritten}")
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=os.path.basename)
