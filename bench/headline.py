@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import reproduce  # noqa: E402
 from reproduce import PAPER_T1, PAPER_T2, success, table1, table2, table3  # noqa: E402
-from run_seeds import DIRS, KEPT, load, pm  # noqa: E402
+from run_seeds import KEPT, kept_name, load, pm  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BEGIN = "<!-- headline: written by `python bench/headline.py --readme README.md` -->"
@@ -62,14 +62,9 @@ VARIANTS = (("ours", "the default"),
              "`--hard-picks`, all toward equation (1)'s picks"),
             ("ours-relations", "`--features relations`: the stacking relations computed by hand "
              "as features"))
-# Table 3's rows beside ours, each the default with one flag (run_seeds.FLAGS), kept as DIRS names
-# them (no-restrict: ours-norestrict-seedS)
+# Table 3's rows beside ours, each the default with one flag (run_seeds.FLAGS), kept as
+# run_seeds.kept_name names them (no-restrict: ours-norestrict-seedS)
 ABLATIONS = ("end2new", "init2new", "no-restrict", "direct-ppo")
-
-
-def kept_name(variant):
-    """The file prefix of a variant's kept runs: taskexp.py's name for its folder."""
-    return DIRS.get(variant, variant)
 
 
 def kept_names():

@@ -30,7 +30,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from run_seeds import DIRS, KEPT, load, pm, run_dir, run_one  # noqa: E402
+from run_seeds import KEPT, kept_name, load, pm, run_dir, run_one  # noqa: E402
 
 from taskexp_lib.config import Config  # noqa: E402
 from taskexp_lib.report import DPI, FIGURES, histogram_figure  # noqa: E402
@@ -213,10 +213,8 @@ def main():
     start = time.time()
     jobs = [(f, v, s) for f in a.features for v in a.variants for s in a.seeds]
     rounds_of = lambda v: a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
-    # --kept: each variant's kept runs read once, by seed, named as taskexp.py names its folders
-    # (the relations' runs: ours-relations-seedK)
-    kept_name = lambda f, v: DIRS.get(v, v) + ("" if f == Config.features else f"-{f}")
-    by_seed = {(f, v): {r["config"]["seed"]: r for r in load(kept_name(f, v), a.kept)}
+    # --kept: each variant's kept runs read once, by seed (the relations' runs: ours-relations)
+    by_seed = {(f, v): {r["config"]["seed"]: r for r in load(kept_name(v, f), a.kept)}
                for f in a.features for v in a.variants} if a.kept else {}
     if a.kept:        # the other feature set may be kept for fewer variants: report those
         jobs = [(f, v, s) for f, v, s in jobs if f == Config.features or by_seed[f, v]]

@@ -19,6 +19,7 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from taskexp_lib import cli
+from taskexp_lib.config import Config
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"],
@@ -35,9 +36,15 @@ DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels", "hard-pi
         "hard-expand6000": "ours-hard-expand6000"}
 
 
+def kept_name(variant, features=Config.features):
+    """A variant's name as taskexp.py names its folder, the prefix of its kept runs' files too;
+    other features than the default add -<features> (ours-relations), as cli.parse_args does."""
+    return DIRS.get(variant, variant) + ("" if features == Config.features else f"-{features}")
+
+
 def run_dir(variant, seed, root):
     """The folder of one run: root/<variant>-seed<k>, named as taskexp.py names its own."""
-    return os.path.join(root, f"{DIRS.get(variant, variant)}-seed{seed}")
+    return os.path.join(root, f"{kept_name(variant)}-seed{seed}")
 
 
 def run_one(variant, seed, rounds, root, extra_args):
