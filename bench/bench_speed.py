@@ -2,11 +2,12 @@
 
     python bench/bench_speed.py                 # everything (~10 min on 2 cores; run it alone)
     python bench/bench_speed.py --skip-full     # without the timed default run (~4 min)
+    python bench/bench_speed.py --hidden 64     # all of it for networks of another width
 
 Prints:
-1. the default run (`python taskexp.py --rounds 3`, all cores): wall time in all and per round,
-   CPU utilisation (user + system time of the main process and its physics workers / wall
-   time), peak memory, and its time by phase of the method (PHASES);
+1. the default run (`python taskexp.py --rounds 3`, all cores, at --hidden's width): wall time
+   in all and per round, CPU utilisation (user + system time of the main process and its physics
+   workers / wall time), peak memory, and its time by phase of the method (PHASES);
 2. the share of physics, network forward/backward and everything else, measured with timers
    around BlockWorld.simulate and the networks in a --scale 0.25 run with one worker and one
    thread (the physics in the main process, so that it can be timed);
@@ -158,11 +159,11 @@ def matmul_seconds(net, B, n, repeats):
     return best
 
 
-def two_cores(repeats=2000):
+def two_cores(hidden, repeats=2000):
     """How much more a matrix product and an element-wise loop of one part's shape (128 samples x
-    6 blocks, width 128) get done on two threads than on one: {name: speed-up}. The ceiling of
-    the data-parallel gradients on this machine."""
-    x, W = np.ones((768, 128), np.float32), np.ones((128, 128), np.float32)
+    6 blocks, the networks' width) get done on two threads than on one: {name: speed-up}. The
+    ceiling of the data-parallel gradients on this machine."""
+    x, W = np.ones((768, hidden), np.float32), np.ones((hidden, hidden), np.float32)
     jobs = {"matrix product": lambda: x @ W, "element-wise tanh": lambda: np.tanh(x)}
     out = {}
     for name, job in jobs.items():
@@ -218,10 +219,12 @@ def env_throughput(n_blocks):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--skip-full", action="store_true", help="skip the timed default run")
+    p.add_argument("--hidden", type=int, default=Config.hidden,
+                   help=f"the networks' width (default {Config.hidden}, Config's)")
     a = p.parse_args()
-    cfg, workers = Config(), cli.usable_cores()
+    cfg, workers = replace(Config(), hidden=a.hidden), cli.usable_cores()
     print(f"config: the defaults of taskexp_lib.config.Config ({cfg.network} over {cfg.features} "
-          f"features, networks in {cfg.dtype}); {workers} cores")
+          f"features, {cfg.hidden} wide, networks in {cfg.dtype}); {workers} cores")
     with tempfile.TemporaryDirectory() as tmp:
         if not a.skip_full:
             out = os.path.join(tmp, "full")
@@ -229,12 +232,14 @@ def main():
             rounds = ", ".join(f"{k}: {s:.0f} s" for k, s in per_round.items())
             with open(os.path.join(out, "results.json")) as f:
                 memory = json.load(f)["wallclock"]["peak_memory_mb"]
-            print(f"\n1. default run, --workers {workers}: {total:.0f} s ({rounds}); CPU "
+            run = "default run" + ("" if a.hidden == Config.hidden else f" --hidden {a.hidden}")
+            print(f"\n1. {run}, --workers {workers}: {total:.0f} s ({rounds}); CPU "
                   f"utilisation {cpu:.2f} of {workers} cores; peak memory of the main process "
                   f"{memory} MB; by phase:")
             for name, s in spent.items():
                 print(f"   {name:36s} {s:6.0f} s  {100 * s / total:4.0f}%")
-        small = cli.parse_args(["--rounds", "1", "--scale", "0.25", "--out", "unused"]).cfg
+        small = cli.parse_args(["--rounds", "1", "--scale", "0.25", "--hidden", str(cfg.hidden),
+                                "--out", "unused"]).cfg
         total, spent = shares(small, os.path.join(tmp, "shares"))
         print(f"\n2. where the time goes (--rounds 1 --scale 0.25, one process, one thread): "
               f"{total:.1f} s")
@@ -242,7 +247,8 @@ def main():
             print(f"   {name:16s} {s:6.1f} s  {100 * s / total:4.0f}%")
         print(f"\n3. networks ({cfg.dtype}): one BC epoch and one PPO update ({cfg.ppo_epochs} "
               "epochs) against their matrix products timed alone (one thread)")
-        gains = ", ".join(f"{name} {gain:.2f}x" for name, gain in two_cores().items())
+        gains = ", ".join(f"{name} {gain:.2f}x"
+                          for name, gain in two_cores(cfg.hidden).items())
         print(f"   both cores against one, alone: {gains}")
         for threads in sorted({1, min(workers, SHARDS)}):
             (bc, bc_mm), (ppo, ppo_mm), n = network_ratios(cfg, threads)

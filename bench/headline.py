@@ -61,7 +61,9 @@ VARIANTS = (("ours", "the default"),
             ("ours-expand6000", "`--expand-episodes 6000`: as many runs from s_T as "
              "`--hard-picks`, all toward equation (1)'s picks"),
             ("ours-relations", "`--features relations`: the stacking relations computed by hand "
-             "as features"))
+             "as features"),
+            ("ours-h64", "`--hidden 64`: networks half as wide, the width of the authors' "
+             "state-based settings"))
 # Table 3's rows beside ours, each the default with one flag (run_seeds.FLAGS), kept as
 # run_seeds.kept_name names them (no-restrict: ours-norestrict-seedS)
 ABLATIONS = ("end2new", "init2new", "no-restrict", "direct-ppo")

@@ -90,7 +90,7 @@ def test_the_readme_headline_is_what_the_kept_runs_say():
     # read as --resume reads a run's settings: a field added since a run was made has its default
     assert all(saved_config(r["config"]) == Config(seed=r["config"]["seed"])
                for r in by_variant["ours"]), "the kept runs are not of the default settings"
-    for variant in (*headline.ABLATIONS, "hard-picks", "expand6000", "relations"):  # one flag
+    for variant in (*headline.ABLATIONS, "hard-picks", "expand6000", "relations", "hidden64"):
         runs = by_variant[headline.kept_name(variant)]
         assert [r["config"]["seed"] for r in runs] in ([], [0, 1, 2]), variant
         for r in runs:
