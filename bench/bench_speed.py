@@ -79,8 +79,21 @@ class Timer:
         setattr(self.cls, self.name, self.inner)
 
 
+def timed_around(calls, cfg, workers, out):
+    """timed_run with a Timer around each call of calls {line: [(cls, name), ...]} -> (its
+    figures, {line: seconds spent in that line's calls}); the code is restored after."""
+    timers = {line: [Timer(*where) for where in wheres] for line, wheres in calls.items()}
+    try:
+        figures = timed_run(cfg, workers, out)
+    finally:
+        for ts in timers.values():
+            for t in ts:
+                t.restore()
+    return figures, {line: sum(t.total for t in ts) for line, ts in timers.items()}
+
+
 # The method's phases, timed around the calls that make them; a phase's inner calls are counted
-# on their own line: {line: (its timers, the lines it holds)}
+# on their own line: {line: (its calls, the lines it holds)}
 PHASES = {"base demos (sec 4.1)": ([(taskexp, "base_demos")], ()),
           "behaviour cloning (BC)": ([(Agent, "bc")], ()),
           "PPO: rollouts": ([(taskexp, "ppo_phase")], ("PPO: updates",)),
@@ -94,32 +107,20 @@ PHASES = {"base demos (sec 4.1)": ([(taskexp, "base_demos")], ()),
 def by_phase(cfg, workers, out):
     """timed_run with a timer around each of PHASES -> (its figures, {line: seconds}), the
     seconds of a line without those of the lines it holds; "the rest" is the time outside."""
-    timers = {line: [Timer(*where) for where in wheres] for line, (wheres, _) in PHASES.items()}
-    try:
-        total, per_round, cpu = timed_run(cfg, workers, out)
-    finally:
-        for ts in timers.values():
-            for t in ts:
-                t.restore()
-    spent = {line: sum(t.total for t in ts) for line, ts in timers.items()}
+    figures, spent = timed_around({line: calls for line, (calls, _) in PHASES.items()}, cfg,
+                                  workers, out)
     for line, (_, inner) in PHASES.items():
         spent[line] -= sum(spent[i] for i in inner)
-    spent["the rest (checkpoints, bookkeeping)"] = total - sum(spent.values())
-    return (total, per_round, cpu), spent
+    spent["the rest (checkpoints, bookkeeping)"] = figures[0] - sum(spent.values())
+    return figures, spent
 
 
 def shares(cfg, out):
     """A run with one worker and one thread, timed around the physics and the networks."""
-    timers = {"physics": [Timer(env2d.BlockWorld, "simulate")],
-              "network": [Timer(Net, name) for Net in NETWORKS.values()
-                          for name in ("forward", "backward")]}
-    try:
-        total, _, _ = timed_run(cfg, 1, out)
-    finally:
-        for ts in timers.values():
-            for t in ts:
-                t.restore()
-    spent = {k: sum(t.total for t in ts) for k, ts in timers.items()}
+    calls = {"physics": [(env2d.BlockWorld, "simulate")],
+             "network": [(Net, name) for Net in NETWORKS.values() for name in ("forward",
+                                                                                "backward")]}
+    (total, _, _), spent = timed_around(calls, cfg, 1, out)
     spent["everything else"] = total - sum(spent.values())
     return total, spent
 
