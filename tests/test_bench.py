@@ -2,16 +2,19 @@
 writes RESULTS.md with every table and the targets, and the figures it links to; the README's
 headline is what the runs kept in results/runs/ say (bench/headline.py); bench/label_budget.py
 measures a labelling budget from one of its runs; bench/bench_speed.py times every phase of a
-run."""
+run; bench/value_fit.py replays a run's value fits."""
 import os
 import re
 import subprocess
 import sys
 
+import numpy as np
+
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, os.path.join(ROOT, "bench"))
 import bench_speed  # noqa: E402
 import headline  # noqa: E402
+import value_fit  # noqa: E402
 from run_seeds import FLAGS  # noqa: E402
 
 import taskexp  # noqa: E402
@@ -137,3 +140,27 @@ def test_bench_speed_accounts_for_every_phase(tmp_path):
     assert taskexp.labelled is before
     assert list(per_round) == [0, 1, 2]
     assert all(s > 0 for s in spent.values()), spent      # the rest too: nothing counted twice
+
+
+def test_value_fit_replays_the_runs_fits():
+    """bench/value_fit.py: with nothing held out and the run's own settings, a replayed value fit
+    ends at the run's critic to the byte, so the held-out curves it prints are of the run's own
+    fits; held out, only rows new to the fit leave its training set."""
+    cfg = cli.parse_args(["--rounds", "1", "--scale", "0.03", "--out", "unused"]).cfg
+    with one_blas_thread():
+        fresh, fits = value_fit.round0_fits(cfg, 1)
+        assert len(fits) == cfg.label_iters
+        fit, n_old = fits[1], len(fits[0]["obs"])
+        agent, curve = value_fit.replay(fresh, fit, n_old, fit["epochs"], fit["batch"], fit["lr"],
+                                        holdout=0)
+        assert len(curve) == fit["epochs"] and np.isnan(curve[0][1])
+        for k, p in agent.critic.params.items():
+            assert p.tobytes() == fit["after"][k].tobytes(), k
+        train, test = value_fit.held_out(n_old, len(fit["obs"]), 0.5, np.random.default_rng(0),
+                                         block=4)
+        assert len(test) and test.min() >= n_old and set(range(n_old)) <= set(train)
+        assert sorted([*train, *test]) == list(range(len(fit["obs"])))
+        agent, curve = value_fit.replay(fresh, fit, n_old, 2, fit["batch"], fit["lr"],
+                                        holdout=0.5)
+        assert np.isfinite(curve).all()
+        assert any((p != fit["after"][k]).any() for k, p in agent.critic.params.items())
