@@ -11,8 +11,9 @@ replays every fit from there, with a fifth of the labels new to that fit held ou
 consecutive rows, so mostly whole runs: the rows of one run are alike), and prints the loss on
 the held-out labels after every epoch, for each --batch and --lr. Held out at 0 (--holdout 0)
 and at the run's own settings, a replay is the run's fit to the byte (tests/test_bench.py).
-A fit is done when its held-out loss stops falling; if it still falls at the run's last epoch,
-fewer epochs would give a worse critic, not just the same one sooner.
+A fit whose held-out loss still falls at the run's last epoch could not stop sooner at the same
+loss. A lower loss is not a better critic for equation (1), though: judge a change of the fits
+by the picks it leaves (bench/feasible_goals.py on the round-0 checkpoint).
 """
 import argparse
 import copy
