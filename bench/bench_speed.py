@@ -1,13 +1,15 @@
 """Where the time of a run goes, and how it grows with the number of blocks.
 
-    python bench/bench_speed.py                 # everything (~10 min on 2 cores; run it alone)
+    python bench/bench_speed.py                 # everything (20-30 min on 2 cores; alone)
     python bench/bench_speed.py --skip-full     # without the timed default run (~4 min)
     python bench/bench_speed.py --hidden 64     # all of it for networks of another width
 
 Prints:
 1. the default run (`python taskexp.py --rounds 3`, all cores, at --hidden's width): wall time
    in all and per round, CPU utilisation (user + system time of the main process and its physics
-   workers / wall time), peak memory, and its time by phase of the method (PHASES);
+   workers / wall time), peak memory, its time by phase of the method (PHASES), and its floor:
+   the time its matrix products (counted by Flops) take at one core's peak rate, plus its
+   physics workers' CPU time, shared over the cores with nothing else done (no run is faster);
 2. the share of physics, network forward/backward and everything else, measured with timers
    around BlockWorld.simulate and the networks in a --scale 0.25 run with one worker and one
    thread (the physics in the main process, so that it can be timed);
@@ -42,11 +44,17 @@ from taskexp_lib.shards import SHARDS
 HERE = os.path.dirname(os.path.abspath(__file__))
 
 
+def children_cpu():
+    """User + system CPU time of this process's children that have ended (the physics workers of
+    the runs it made)."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return children.ru_utime + children.ru_stime
+
+
 def cpu_seconds():
     """User + system CPU time of this process and of its children that have ended."""
-    me, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(
-        resource.RUSAGE_CHILDREN)
-    return me.ru_utime + me.ru_stime + children.ru_utime + children.ru_stime
+    me = resource.getrusage(resource.RUSAGE_SELF)
+    return me.ru_utime + me.ru_stime + children_cpu()
 
 
 def timed_run(cfg, workers, out):
@@ -125,26 +133,85 @@ def shares(cfg, out):
     return total, spent
 
 
-def products(net, B, n):
-    """The matrix products of one forward and backward of `net` on B x n tokens, as operand
-    shapes: for every weight W of an MLP or an attention projection, x W, x^T d and d W^T; for
-    attention, the per-head products (Q K^T, A V; dY V^T, A^T dY, dS K, dS^T Q)."""
+def products(net, B, n, passes=("forward", "backward")):
+    """The matrix products of `passes` of `net` on B x n tokens, as operand shapes. Forward: x W
+    for every weight W of an MLP or an attention projection, and per head Q K^T and A V.
+    Backward: x^T d and d W^T for every W, and per head dY V^T, A^T dY, dS K and dS^T Q."""
     rows, out = B * n, []
     modules = getattr(net, "modules", {"phi": getattr(net, "phi", None),
                                        "rho": getattr(net, "rho", None)})
     for m in modules.values():
         if isinstance(m, nn.MLP):
-            Ws = [m.params[f"W{k}"] for k in range(m.n_layers)]
+            Ws, heads = [m.params[f"W{k}"] for k in range(m.n_layers)], {}
         elif isinstance(m, nn.SelfAttention):
             Ws = [m.params[f"W{c}"] for c in m.NAMES]
             h, d = m.heads, m.d
-            out += [((B, h, n, d), (B, h, d, n))] * 2 + [((B, h, n, n), (B, h, n, d))] * 4
+            scores = ((B, h, n, d), (B, h, d, n))                 # Q K^T (and dY V^T)
+            mix = ((B, h, n, n), (B, h, n, d))                    # A V (and A^T dY, dS K, dS^T Q)
+            heads = {"forward": [scores, mix], "backward": [scores] + [mix] * 3}
         else:
             continue
+        for p in passes:
+            out += heads.get(p, [])
         for W in Ws:
             i, o = W.shape
-            out += [((rows, i), (i, o)), ((i, rows), (rows, o)), ((rows, o), (o, i))]
+            ops = {"forward": [((rows, i), (i, o))],
+                   "backward": [((i, rows), (rows, o)), ((rows, o), (o, i))]}
+            out += [op for p in passes for op in ops[p]]
     return out
+
+
+def flops(ops):
+    """Floating-point operations of matrix products given as operand shapes: 2 m k p for each
+    (m x k) (k x p), times the batch dimensions in front."""
+    return sum(2 * int(np.prod(a[:-1])) * a[-1] * b[-1] for a, b in ops)
+
+
+class Flops:
+    """Wraps the forward and backward of every network class (NETWORKS) so that the operations of
+    their matrix products (products, flops) add up in self.total {"forward": .., "backward": ..}
+    over all the calls, whatever the network or the batch."""
+
+    def __init__(self):
+        self.total, self.per_sample, self.inner = {"forward": 0, "backward": 0}, {}, []
+        for Net in NETWORKS.values():
+            for name in self.total:
+                self._wrap(Net, name)
+
+    def _wrap(self, Net, name):
+        inner, counter = getattr(Net, name), self
+
+        def counted(net, x, *args, **kwargs):
+            B, n = np.shape(x)[:2]
+            counter.total[name] += B * counter.sample(net, n, name)
+            return inner(net, x, *args, **kwargs)
+        setattr(Net, name, counted)
+        self.inner.append((Net, name, inner))
+
+    def sample(self, net, n, name):
+        """The operations of one sample of n tokens through `name` of `net`, found once per
+        network shape (replicas and the same network at other batch sizes share it)."""
+        key = (type(net), tuple(p.shape for p in net.params.values()), n, name)
+        if key not in self.per_sample:
+            self.per_sample[key] = flops(products(net, 1, n, (name,)))
+        return self.per_sample[key]
+
+    def restore(self):
+        for Net, name, inner in self.inner:
+            setattr(Net, name, inner)
+
+
+def product_rate(hidden, n_blocks, dtype, repeats=300):
+    """Operations per second of one core on a matrix product of one part's shape (bc_batch /
+    SHARDS samples x n_blocks tokens, by hidden x hidden), the best of `repeats` timings."""
+    x = np.ones((Config.bc_batch // SHARDS * n_blocks, hidden), dtype)
+    W = np.ones((hidden, hidden), dtype)
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        x @ W
+        best = min(best, time.perf_counter() - t0)
+    return flops([(x.shape, W.shape)]) / best
 
 
 def matmul_seconds(net, B, n, repeats):
@@ -229,7 +296,12 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         if not a.skip_full:
             out = os.path.join(tmp, "full")
-            (total, per_round, cpu), spent = by_phase(cfg, workers, out)
+            counted, physics = Flops(), children_cpu()
+            try:
+                (total, per_round, cpu), spent = by_phase(cfg, workers, out)
+            finally:
+                counted.restore()
+            physics = children_cpu() - physics
             rounds = ", ".join(f"{k}: {s:.0f} s" for k, s in per_round.items())
             with open(os.path.join(out, "results.json")) as f:
                 memory = json.load(f)["wallclock"]["peak_memory_mb"]
@@ -239,6 +311,16 @@ def main():
                   f"{memory} MB; by phase:")
             for name, s in spent.items():
                 print(f"   {name:36s} {s:6.0f} s  {100 * s / total:4.0f}%")
+            ops, rate = counted.total, product_rate(cfg.hidden, cfg.n_blocks, cfg.dtype)
+            products_s = sum(ops.values()) / rate
+            least = (products_s + physics) / workers
+            print(f"   its floor: the networks' matrix products, {sum(ops.values()):.2e} "
+                  f"operations (forward {ops['forward']:.2e}, backward "
+                  f"{ops['backward']:.2e}), take {products_s:.0f} s of one core at its peak "
+                  f"({rate / 1e9:.0f} GFLOP/s on a product of one part's shape); the physics "
+                  f"workers used {physics:.0f} s of CPU. With nothing else to do and both kept "
+                  f"busy, {workers} cores need {least:.0f} s: the run took {total / least:.2f}x "
+                  "that")
         small = cli.parse_args(["--rounds", "1", "--scale", "0.25", "--hidden", str(cfg.hidden),
                                 "--out", "unused"]).cfg
         total, spent = shares(small, os.path.join(tmp, "shares"))

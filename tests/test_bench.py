@@ -2,7 +2,8 @@
 writes RESULTS.md with every table and the targets, and the figures it links to; the README's
 headline is what the runs kept in results/runs/ say (bench/headline.py); bench/label_budget.py
 measures a labelling budget from one of its runs; bench/bench_speed.py times every phase of a
-run; bench/value_fit.py replays a run's value fits."""
+run and counts the operations of its matrix products; bench/value_fit.py replays a run's value
+fits."""
 import os
 import re
 import subprocess
@@ -140,6 +141,31 @@ def test_bench_speed_accounts_for_every_phase(tmp_path):
     assert taskexp.labelled is before
     assert list(per_round) == [0, 1, 2]
     assert all(s > 0 for s in spent.values()), spent      # the rest too: nothing counted twice
+
+
+def test_bench_speed_counts_the_networks_operations():
+    """bench_speed.Flops counts the matrix products of every forward and backward, checked
+    against the attention network's operations written out by hand (2 per multiply-add), per
+    token: the embedding F H + H H; per layer the projections Q, K, V, O (4 H H), the FFN (2 H H)
+    and, per head, Q K^T and A V (n d each, n H over the heads); the head H H + H out. The
+    backward does each product twice (x^T d and d W^T; four per-head products for two)."""
+    agent = taskexp.make_agent(Config())
+    B, n, H = 5, agent.n_blocks, agent.hidden
+    f = agent.features(np.zeros((B, n, 6)))
+    F, layers = f.shape[-1], agent.critic.layers
+    per_token = lambda out: 2 * (F * H + H * H + layers * (6 * H * H + 2 * n * H) + H * H + H * out)
+    counted = bench_speed.Flops()
+    try:
+        agent.critic.backward(np.ones_like(agent.critic.forward(f)))
+        agent.actor.forward(f[:2])
+    finally:
+        counted.restore()
+    actor_out = 1 + agent.n_x + agent.n_y
+    assert counted.total == {"forward": B * n * per_token(1) + 2 * n * per_token(actor_out),
+                             "backward": 2 * B * n * per_token(1)}
+    counted.total["forward"] = 0
+    agent.actor.forward(f)                                     # restored: nothing counts
+    assert counted.total["forward"] == 0
 
 
 def test_value_fit_replays_the_runs_fits():
