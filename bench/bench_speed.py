@@ -68,23 +68,31 @@ def timed_run(cfg, workers, out):
     return wall, per_round, (cpu_seconds() - cpu0) / wall
 
 
-class Timer:
-    """Wraps cls.name so that the seconds spent in it add up in self.total."""
+class Wrap:
+    """Replaces cls.name by a call of self.around(the original, *args, **kwargs) until restore():
+    what a subclass measures around every call of a method or a module's function."""
 
     def __init__(self, cls, name):
-        self.total, self.cls, self.name, self.inner = 0.0, cls, name, getattr(cls, name)
-        timer = self
-
-        def wrapped(*args, **kwargs):
-            t0 = time.perf_counter()
-            try:
-                return timer.inner(*args, **kwargs)
-            finally:
-                timer.total += time.perf_counter() - t0
-        setattr(cls, name, wrapped)
+        self.cls, self.name, self.inner = cls, name, getattr(cls, name)
+        setattr(cls, name, lambda *args, **kwargs: self.around(self.inner, *args, **kwargs))
 
     def restore(self):
         setattr(self.cls, self.name, self.inner)
+
+
+class Timer(Wrap):
+    """Wraps cls.name so that the seconds spent in it add up in self.total."""
+
+    def __init__(self, cls, name):
+        self.total = 0.0
+        super().__init__(cls, name)
+
+    def around(self, inner, *args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            self.total += time.perf_counter() - t0
 
 
 def timed_around(calls, cfg, workers, out):
@@ -173,20 +181,8 @@ class Flops:
     over all the calls, whatever the network or the batch."""
 
     def __init__(self):
-        self.total, self.per_sample, self.inner = {"forward": 0, "backward": 0}, {}, []
-        for Net in NETWORKS.values():
-            for name in self.total:
-                self._wrap(Net, name)
-
-    def _wrap(self, Net, name):
-        inner, counter = getattr(Net, name), self
-
-        def counted(net, x, *args, **kwargs):
-            B, n = np.shape(x)[:2]
-            counter.total[name] += B * counter.sample(net, n, name)
-            return inner(net, x, *args, **kwargs)
-        setattr(Net, name, counted)
-        self.inner.append((Net, name, inner))
+        self.total, self.per_sample = {"forward": 0, "backward": 0}, {}
+        self.wraps = [Counted(self, Net, name) for Net in NETWORKS.values() for name in self.total]
 
     def sample(self, net, n, name):
         """The operations of one sample of n tokens through `name` of `net`, found once per
@@ -197,8 +193,32 @@ class Flops:
         return self.per_sample[key]
 
     def restore(self):
-        for Net, name, inner in self.inner:
-            setattr(Net, name, inner)
+        for w in self.wraps:
+            w.restore()
+
+
+class Counted(Wrap):
+    """One network class's forward or backward, for Flops: each call adds the operations of the
+    batch it is given (B samples of n tokens) to counter.total[name]."""
+
+    def __init__(self, counter, Net, name):
+        self.counter = counter
+        super().__init__(Net, name)
+
+    def around(self, inner, net, x, *args, **kwargs):
+        B, n = np.shape(x)[:2]
+        self.counter.total[self.name] += B * self.counter.sample(net, n, self.name)
+        return inner(net, x, *args, **kwargs)
+
+
+def best_seconds(job, repeats):
+    """The fastest of `repeats` timings of job(): a floor should not carry the machine's noise."""
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        job()
+        best = min(best, time.perf_counter() - t0)
+    return best
 
 
 def product_rate(hidden, n_blocks, dtype, repeats=300):
@@ -206,25 +226,18 @@ def product_rate(hidden, n_blocks, dtype, repeats=300):
     SHARDS samples x n_blocks tokens, by hidden x hidden), the best of `repeats` timings."""
     x = np.ones((Config.bc_batch // SHARDS * n_blocks, hidden), dtype)
     W = np.ones((hidden, hidden), dtype)
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        x @ W
-        best = min(best, time.perf_counter() - t0)
-    return flops([(x.shape, W.shape)]) / best
+    return flops([(x.shape, W.shape)]) / best_seconds(lambda: x @ W, repeats)
 
 
 def matmul_seconds(net, B, n, repeats):
     """The matrix products of one forward and backward of `net` on B x n tokens, alone, in one
-    thread: the best of `repeats` timings (a floor should not carry the machine's noise)."""
+    thread: the best of `repeats` timings."""
     ops = [(np.ones(a, net.dtype), np.ones(b, net.dtype)) for a, b in products(net, B, n)]
-    best = float("inf")
-    for _ in range(repeats):
-        t0 = time.perf_counter()
+
+    def all_products():
         for x, y in ops:
             x @ y
-        best = min(best, time.perf_counter() - t0)
-    return best
+    return best_seconds(all_products, repeats)
 
 
 def two_cores(hidden, repeats=2000):
