@@ -17,7 +17,10 @@ checks, float32 for training); losses, log-probs and returns are always float64.
 through a passed np.random.Generator (or an integer seed for initialisation). Checkpoints are
 read and written by taskexp_lib/checkpoint.py.
 """
+from functools import partial
+
 import numpy as np
+from tqdm import tqdm
 
 from taskexp_lib import checkpoint
 from taskexp_lib.config import Config
@@ -263,28 +266,29 @@ class Agent:
         a = dist.sample(self.rng if rng is None else rng)
         return a, dist.log_prob(a), self.critic.forward(f)[..., 0].mean(-1)
 
-    def bc(self, obs, actions, epochs, batch_size, lr, rng, max_grad_norm=None):
+    def bc(self, obs, actions, epochs, batch_size, lr, rng, max_grad_norm=None, bar=None):
         """Behaviour cloning (sec 4.1, 4.3): minimise L_BC = -mean log pi(a | s, g) by Adam.
 
         obs (N, n, 6), actions (N, 3).  -> list of the mean minibatch loss of each epoch.
+        bar: a progress bar factory (tqdm) to show the minibatches done; default none.
         """
         actions = np.asarray(actions, dtype=np.int64)
         self._check_actions(actions)
         loss = lambda out, a: bc_loss(out, a, self.n_x, self.action_dist)
         return self._fit("BC", self.actor, self.actor_opt, loss, obs, actions, epochs,
-                         batch_size, lr, rng, max_grad_norm)
+                         batch_size, lr, rng, max_grad_norm, bar=bar)
 
-    def fit_value(self, obs, returns, epochs, batch_size, lr, rng, max_grad_norm=None):
+    def fit_value(self, obs, returns, epochs, batch_size, lr, rng, max_grad_norm=None, bar=None):
         """Regress V(s, g) on returns (e.g. of demonstrations): L = mean 0.5 (V - R)^2.
 
         obs (N, n, 6), returns (N,).  -> list of the mean minibatch loss of each epoch.
         """
         returns = np.asarray(returns, np.float64)
         return self._fit("value fit", self.critic, self.critic_opt, value_loss, obs, returns,
-                         epochs, batch_size, lr, rng, max_grad_norm)
+                         epochs, batch_size, lr, rng, max_grad_norm, bar=bar)
 
     def fit_value_pairs(self, obs, returns, weight, epochs, batch_size, lr, rng,
-                        max_grad_norm=None):
+                        max_grad_norm=None, bar=None):
         """Regress V on pairs of states under one goal, their difference too (pair_value_loss):
         obs (N, 2, n, 6), returns (N, 2); a minibatch holds both states of each of its pairs.
         -> list of the mean minibatch loss of each epoch."""
@@ -292,14 +296,14 @@ class Agent:
         both = lambda o: np.concatenate([o[:, 0], o[:, 1]])          # the states a, then b
         return self._fit("pair value fit", self.critic, self.critic_opt, loss, obs,
                          np.asarray(returns, np.float64), epochs, batch_size, lr, rng,
-                         max_grad_norm, inputs=both)
+                         max_grad_norm, inputs=both, bar=bar)
 
     def _fit(self, phase, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng,
-             max_grad_norm, inputs=lambda o: o):
+             max_grad_norm, inputs=lambda o: o, bar=None):
         """Minibatch Adam on loss_fn(out, targets) -> (L, dL/dout, ...), a mean over the samples.
         Each minibatch runs as SHARDS parts on both cores (shards.py). Features are computed per
         part, as (N, n, F) float64 for N = 100k would need ~300 MB. inputs(obs[idx]) gives the
-        network's observations of a part."""
+        network's observations of a part; bar(total, desc) a progress bar, one tick a minibatch."""
         obs, opt.lr, losses = np.asarray(obs, dtype=np.float64), lr, []
         replicas = [replica(net) for _ in range(SHARDS)]
 
@@ -308,7 +312,8 @@ class Agent:
             loss, dout = loss_fn(out, targets[idx])[:2]
             return loss, replicas[k].backward(dout)
 
-        with Shards(self.threads) as shards:
+        steps = epochs * -(-len(obs) // batch_size)
+        with Shards(self.threads) as shards, (bar or _no_bar)(total=steps, desc=phase) as progress:
             for e in range(epochs):
                 epoch = []
                 for i, idx in enumerate(_minibatches(len(obs), batch_size, rng)):
@@ -318,6 +323,7 @@ class Agent:
                                  gradient_norm=norm)
                     opt.step(grads)
                     epoch.append(loss)
+                    progress.update(1)
                 check_finite(f"{phase} epoch {e + 1}", parameters=net.params)
                 losses.append(float(np.mean(epoch)))
         return losses
@@ -411,6 +417,9 @@ class Agent:
         """Read a checkpoint written by save -> Agent (or (Agent, {key: array}) for the keys in
         `extra`); ValueError naming the file and what does not match (checkpoint.load_agent)."""
         return checkpoint.load_agent(cls, path, extra)
+
+
+_no_bar = partial(tqdm, disable=True)
 
 
 def _minibatches(N, size, rng):

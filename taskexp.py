@@ -37,8 +37,15 @@ from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Confi
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, observation, on_same_spot
 from taskexp_lib.labels import labelled
 from taskexp_lib.nn import mlp_backward
-from taskexp_lib.report import task_stats
-from taskexp_lib.rollout import Trajectory, physics_pool, run_episodes, run_worlds, success_rate
+from taskexp_lib.report import order_stats, task_stats
+from taskexp_lib.rollout import (
+    Trajectory,
+    physics_pool,
+    replay,
+    run_episodes,
+    run_worlds,
+    success_rate,
+)
 from taskexp_lib.shapes import eval_tasks
 from taskexp_lib.shards import SHARDS, read_only_map
 
@@ -209,7 +216,7 @@ def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print
     demos' tasks. Returns (the round's record, tasks, demo observations, demo actions)."""
     log(f"[round 0] base skills: {cfg.base_demos} single-block demos, BC, PPO")
     tasks, obs, actions = base_demos(cfg, envs, rng, cfg.base_demos, bar)
-    bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
+    bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng, bar=bar)
     log(f"  BC loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
     ppo_log = ppo_phase(agent, tasks, cfg, envs, short_envs, rng, "PPO base", pieces=pieces,
                         bar=bar)
@@ -301,6 +308,33 @@ def relabel(traj, env):
     return Trajectory(goals, traj.states[: T + 1], traj.actions[:T], True)
 
 
+def other_orders(demos, envs, rng):
+    """Not in the paper: each demonstration's moves in another order that physics allows.
+
+    A demonstration shows one order of its moves, and BC learns that order's habits with it. A
+    joined one moves the blocks of s0 -> sT first and g*'s after, so where g*'s new goal does not
+    depend on them (a block put on a free table spot, say) the data insist on "the goals already
+    met first", which is "the higher goal first" whenever the base task put its block on
+    another; and every round passes on the order the last round's policy happened to choose.
+    Here the moves of each demonstration are replayed from s0 in a random other order (the
+    reverse, where the draw gives its own): where the simulator meets the same goals, that order
+    is kept too (demo.other_order), so the only order the data insist on is the one physics
+    demands, a support before what it carries. Like relabelling, a use of the simulator, not a
+    rule. Returns how many other orders were kept.
+    """
+    moved = [d for d in demos if len(d.actions) > 1]
+    plans = []
+    for d in moved:
+        order = rng.permutation(len(d.actions))
+        if (order == np.arange(len(order))).all():
+            order = order[::-1]
+        plans.append(d.actions[order])
+    others = replay([(d.states[0], d.goals) for d in moved], plans, envs)
+    for demo, other in zip(moved, others):
+        demo.other_order = other if other.success else None
+    return sum(other.success for other in others)
+
+
 def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=silent):
     """One round of sec 4.2. tasks: the previous round's tasks. Returns (demos, info).
 
@@ -316,11 +350,13 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
                  if t.success]
     asked = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
     chosen, rules = [], (cfg.select, "init2new") if cfg.hard_picks else (cfg.select,)
-    for rule in rules:      # equation (1) draws nothing at random: both cores share the work
-        pick = lambda ag, job, rule=rule: pieces.select_goal(ag, job[0].states[0],
-                                                             job[0].states[-1], job[1], rule)
-        picks = read_only_map(agent, pick, list(zip(found, asked)), agent.threads)
-        chosen += [cands[i] for cands, i in zip(asked, picks)]
+    with bar(total=len(found) * len(rules), desc="eq. (1)") as progress:
+        for rule in rules:      # equation (1) draws nothing at random: both cores share the work
+            def pick(ag, job, rule=rule):
+                progress.update(1)
+                return pieces.select_goal(ag, job[0].states[0], job[0].states[-1], job[1], rule)
+            picks = read_only_map(agent, pick, list(zip(found, asked)), agent.threads)
+            chosen += [cands[i] for cands, i in zip(asked, picks)]
     starts = found * len(rules)                     # cfg.hard_picks: each trajectory twice
     onward = [(traj.states[-1], goals) for traj, goals in zip(starts, chosen)]
     with bar(total=len(onward), desc="verify") as progress:
@@ -328,17 +364,15 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     demos, reached = [], [more.success for more in verified]
     for traj, goals, more in zip(starts, chosen, verified):
         joined = join(traj, more, goals, more.success)
-        if more.success:
-            demos.append(joined)
-        else:
-            relabelled = pieces.relabel(joined, env)
-            if relabelled is not None:
-                demos.append(relabelled)
+        demo = joined if more.success else pieces.relabel(joined, env)
+        if demo is not None:
+            demos.append(demo)
+    other = other_orders(demos, envs, rng) if cfg.other_orders else 0
     # picks_reached: the share of equation (1)'s picks that the policy reaches from s_T, the
     # leading indicator of whether V(s, g) tells a reachable goal from an unreachable one
     info = dict(attempts=len(batch), successful=len(found), joined=sum(reached),
                 relabelled=len(demos) - sum(reached),
-                picks_reached=sum(reached[:len(found)]) / max(len(found), 1))
+                picks_reached=sum(reached[:len(found)]) / max(len(found), 1), other_orders=other)
     return demos, info
 
 
@@ -357,6 +391,11 @@ class RunState:
     results: dict = field(default_factory=dict)    # config, one record per round, wall-clock
 
 
+def with_other_orders(demos):
+    """The demonstrations, each followed by its task in the other order where there is one."""
+    return [t for d in demos for t in (d, d.other_order) if t is not None]
+
+
 def demo_arrays(demos):
     """All (observation, action) pairs of a list of demonstrations: (N, n, 6), (N, 3)."""
     return (np.concatenate([d.obs()[:-1] for d in demos]),
@@ -367,10 +406,11 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
     """Sec 4.3: BC on the new demos mixed with the kept ones, then PPO on the new tasks mixed with
     as many old ones. The buffer and the task list keep the newest cfg.buffer_size entries (the
     memory bound of a long run). Updates `run`; returns the round's BC losses and PPO success."""
-    new_obs, new_act = demo_arrays(demos)
+    new_obs, new_act = demo_arrays(with_other_orders(demos))
     run.buffer_obs = np.concatenate([run.buffer_obs, new_obs])[-cfg.buffer_size:]
     run.buffer_act = np.concatenate([run.buffer_act, new_act])[-cfg.buffer_size:]
-    bc_loss = agent.bc(run.buffer_obs, run.buffer_act, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng)
+    bc_loss = agent.bc(run.buffer_obs, run.buffer_act, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng,
+                       bar=bar)
     log(f"  BC on {len(run.buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
     new_tasks = [(d.states[0].copy(), d.goals) for d in demos]    # a copy: not the whole episode
     old = [run.all_tasks[i] for i in rng.integers(len(run.all_tasks), size=len(new_tasks))]
@@ -433,12 +473,18 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
                                cfg.label_later_epochs))
     demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces, bar)
     stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
+    stats.update(order_stats(with_other_orders(demos)))     # the order the actor's data teach
     runs = info["successful"] * (2 if cfg.hard_picks else 1)      # verification runs from s_T
     unusable = runs - info["joined"] - info["relabelled"]
     log(f"  {info['attempts']} attempts, {info['successful']} successful, {runs} runs from s_T: "
         f"{info['joined']} joined, {info['relabelled']} relabelled, {unusable} unusable "
         f"({info['picks_reached']:.0%} of the picks reached); "
         f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
+    if cfg.other_orders:
+        log(f"  {info['other_orders']} of them in another order too, as physics allows")
+    if stats["higher_first"] is not None:
+        log(f"  {stats['higher_first']:.0%} of the {stats['multi_layer_steps']} demonstrated steps "
+            "with goals pending on several layers move a higher goal first")
     record["expansion"] = info
     if demos:
         record.update(self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar, log))

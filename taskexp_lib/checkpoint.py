@@ -19,7 +19,8 @@ from .features import FEATURES
 from .geometry import GEOMETRY
 from .nets import NETWORKS
 
-FORMAT_VERSION = 3              # 2: the header records the world's GEOMETRY; 3: its features
+# 2: the header records the world's GEOMETRY; 3: its features; 4: the features code no layers
+FORMAT_VERSION = 4
 STATE_VERSION = 1
 STATE_KEYS = ("state_version", "round", "results", "run_rng", "buffer_obs", "buffer_act",
               "all_tasks.states", "all_tasks.goals", "prev_tasks.states", "prev_tasks.goals")

@@ -45,10 +45,12 @@ class Config:
     """sec 4.1: a scene takes warmup + 1 random moves, each a demo if usable, so demos come after
     0..warmup earlier moves and see stacks of every height; the paper's demos come from
     scattered scenes (warmup = 0)"""
-    free_table: bool = False
+    free_table: bool = True
     """sec 4.1: the base demos' "onto the table" moves land on free table spots, as in the
     authors' environment, so that about half of the single-block goals sit on another block
-    (off: any x, and in the world that drops most such moves land on a block)"""
+    (off: any x, and in the world that drops 82% of them land on a block: then most one-step
+    extensions that a block on the table can carry lie out of the base skills' reach, equation
+    (1) picks ones that do not depend on the base task, and the data teach "higher goal first")"""
     max_stay: int = 2
     """sec 4.1: up to this many "stay where you are" goals for other blocks in a base task"""
     bc_epochs: int = 8
@@ -100,19 +102,24 @@ class Config:
     """not in the paper: each s_T is also run toward init2new's pick, argmin V(s0, g), the
     candidate hardest from s_0. Almost always relabelled, these runs show blocks moved under and
     onto others, which the one-drop extensions that equation (1) picks never show"""
+    other_orders: bool = True
+    """sec 4.2, not in the paper: BC learns each generated demonstration's moves in another order
+    too, where the simulator, replaying them so from s_0, meets the same goals; the data then
+    insist only on the order that physics demands (taskexp.other_orders)"""
 
     label_tasks: int = 2000
     """not in the paper: labelled outcomes as data for V(s, g) (taskexp_lib/labels.py), on this
     many tasks, after the base PPO; 0 = off (V learns from PPO alone, as in the paper). The policy
     runs toward one-alteration candidates from s_T and s_0 on the short budget, and V is regressed
     on the discounted outcomes"""
-    label_later_tasks: int = 2000
+    label_later_tasks: int = 0
     """label_tasks: label before every later task expansion too, on this many of the tasks it
-    starts from (the last round's new ones); 0 = only after the base PPO"""
+    starts from (the last round's new ones); 0 = only after the base PPO (the default: with the
+    data in the order physics demands, later labels cost half the run and bought no zero-shot
+    success, RESULTS.md)"""
     label_later_epochs: int = 30
     """label_later_tasks: epochs of those later value regressions (split as label_epochs is).
-    A sixth of the later budget (1000 tasks, 6 epochs) made the default run 0.61x as long, but
-    round 3 made 40% fewer tall tasks and less zero-shot success (the README's headline)"""
+    (30 was the default's until 2026-12-04, with 2000 later tasks)"""
     label_per: int = 4
     """label_tasks: candidates labelled per successful trajectory"""
     label_top: int = 2
@@ -145,7 +152,7 @@ class Config:
 
 # Fields added since runs were first kept, each with the value that does what the code before it
 # did: a run saved without the field resumes with that value
-ADDED = {"hard_picks": False}                       # 2026-12-02
+ADDED = {"hard_picks": False, "other_orders": False}       # 2026-12-02, 2026-12-04
 
 
 def upgraded(settings):

@@ -7,12 +7,13 @@ comparing blocks (self-attention does). The world's geometry comes from geometry
 """
 import numpy as np
 
-from .geometry import BLOCK_H, BLOCK_W, TABLE_X, THRESHOLD, layer
+from .geometry import BLOCK_H, BLOCK_W, TABLE_X, THRESHOLD
 
 N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the table
 
 
-# The feature layout: (name, width) of each column group, in order; n_y is the number of layers.
+# The feature layout: (name, width) of each column group, in order; n_y (the number of layers)
+# scales heights.
 # Tests and notebooks find a feature by name (feature_columns), never by its column number.
 # The features: "plain" (what one block and its goal are) or "relations" (plus RELATIONS,
 # stacking preconditions computed by hand, which a network over plain features must learn).
@@ -22,7 +23,7 @@ FEATURES = ("plain", "relations")
 def feature_layout(n_y, features):
     plain = [("x", 1), ("y", 1), ("cos", 1), ("sin", 1), ("has_goal", 1), ("goal_x", 1),
              ("goal_y", 1), ("to_goal_x", 1), ("to_goal_y", 1), ("at_goal", 1),
-             ("layer", n_y), ("goal_layer", n_y), ("x_rbf", N_RBF), ("goal_x_rbf", N_RBF)]
+             ("x_rbf", N_RBF), ("goal_x_rbf", N_RBF)]
     if features == "plain":
         return plain
     return plain + [*[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
@@ -38,15 +39,19 @@ def feature_columns(n_y, features):
 
 def featurize(obs, n_y, features):
     """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, F), laid out as
-    feature_layout(n_y, features) says (F = 10 + 2 n_y + 2 N_RBF plain, 15 + 2 n_y + 3 N_RBF
-    with the relations).
+    feature_layout(n_y, features) says (F = 10 + 2 N_RBF plain, 15 + 3 N_RBF with the relations).
 
-    Besides normalised pose, goal and offset to goal, each block gets one-hot codes of its layer
-    and goal layer and RBF codes of its x and goal x: what it is and where it wants to be, on
-    its own. Which block rests under which, or whose goal lies on whose, is a relation between
-    two blocks: features="relations" adds hand-computed ones (RELATIONS); with "plain" the
-    network must find them itself (self-attention compares every pair of blocks).
-    Goal columns are multiplied by has_goal, so "no goal" is all zeros; n_y layers are coded.
+    Besides normalised pose, goal and offset to goal, each block gets RBF codes of its x and goal
+    x: what it is and where it wants to be, on its own. Heights are numbers only. A one-hot code
+    of the layer (as until 2026-12-04) gives every layer weights of its own, and a layer no
+    demonstration has reached yet meets weights that never learnt: the policy then dropped the
+    top block of a tower of four a bin or two off its goal x (bench/build_order.py). A number
+    carries what the lower layers taught up to the next one.
+    Which block rests under which, or whose goal lies on whose, is a relation between two blocks:
+    features="relations" adds hand-computed ones (RELATIONS); with "plain" the network must find
+    them itself (self-attention compares every pair of blocks).
+    Goal columns are multiplied by has_goal, so "no goal" is all zeros; heights are divided by
+    the height of n_y layers.
     """
     if features not in FEATURES:
         raise ValueError(f"features {features!r}: one of {FEATURES}")
@@ -58,14 +63,12 @@ def featurize(obs, n_y, features):
     x, y, ang, gx, gy, g = (obs[..., j] for j in range(6))
     g = (g > 0.5).astype(np.float64)
     dist = np.hypot(gx - x, gy - y)
-    onehot_layer = lambda v: np.eye(n_y)[np.clip(layer(v), 0, n_y - 1)]    # (B, n) -> (B, n, n_y)
     centres = np.linspace(TABLE_X[0], TABLE_X[1], N_RBF)
     rbf = lambda v: np.exp(-0.5 * ((v[..., None] - centres) / (w / 4)) ** 2)
     at_goal = g * (dist < THRESHOLD)
     cols = [(x - mid) / half, y / (n_y * h), np.cos(ang), np.sin(ang), g,
             g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h, at_goal]
-    plain = [np.stack(cols, -1), onehot_layer(y), g[..., None] * onehot_layer(gy), rbf(x),
-             g[..., None] * rbf(gx)]
+    plain = [np.stack(cols, -1), rbf(x), g[..., None] * rbf(gx)]
     if features == "plain":
         return np.concatenate(plain, axis=-1)
     rel = relations(x, y, gx, gy, g, at_goal)

@@ -65,9 +65,11 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
         batch = [tasks[i] for i in rng.integers(len(tasks), size=size)]
         found = [t for t in run_episodes(agent, batch, envs, rng, values=False) if t.success]
         drawn = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
-        rank = lambda ag, job: top_candidates(ag, job[0], job[1], cfg.label_top, pieces,
-                                              cfg.select)
-        tops = read_only_map(agent, rank, list(zip(found, drawn)), agent.threads)
+        with bar(total=len(found), desc=f"rank {it + 1}") as progress:
+            def rank(ag, job):
+                progress.update(1)
+                return top_candidates(ag, job[0], job[1], cfg.label_top, pieces, cfg.select)
+            tops = read_only_map(agent, rank, list(zip(found, drawn)), agent.threads)
         asked = []                                    # (trajectory, candidate) pairs to label
         for traj, cands, top in zip(found, drawn, tops):
             rest = [i for i in rng.permutation(len(cands)) if i not in top]
@@ -90,10 +92,10 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
         if not obs:                                   # nothing solved yet: nothing to label
             continue
         loss = agent.fit_value(np.concatenate(obs), np.concatenate(targets), epochs,
-                               cfg.bc_batch, cfg.label_lr, rng)
+                               cfg.bc_batch, cfg.label_lr, rng, bar=bar)
         if cfg.label_pair > 0:
             loss = agent.fit_value_pairs(np.stack(pairs), np.array(pair_targets), cfg.label_pair,
-                                         epochs, cfg.bc_batch, cfg.label_lr, rng)
+                                         epochs, cfg.bc_batch, cfg.label_lr, rng, bar=bar)
     return dict(label_runs=n_runs, label_rows=int(sum(len(t) for t in targets)),
                 label_success=n_reached / max(n_runs, 1), label_loss=loss)
 

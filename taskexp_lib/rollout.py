@@ -89,6 +89,7 @@ class Trajectory:
     success: bool
     logp: np.ndarray = None
     values: np.ndarray = None
+    other_order: "Trajectory" = None    # the same task, its moves in another order (taskexp.py)
 
     def obs(self, goals=None):
         """Observations (T+1, n, 6) of the visited states under `goals` (default: its own)."""
@@ -155,6 +156,32 @@ def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None, va
                 if bar is not None:
                     bar.update(1)
                 start(k)
+
+
+def replay(tasks, plans, envs):
+    """Play fixed sequences of actions: for tasks[i] = (state, goals), the actions plans[i] (T, 3)
+    in order, len(envs) tasks at a time, until the goals hold (stable) or the plan ends; the
+    worlds' step budget does not cut a plan. Returns a list of Trajectory in the order of tasks,
+    success True when the goals held at the end."""
+    out = []
+    for start in range(0, len(tasks), len(envs)):
+        chunk = range(start, min(start + len(envs), len(tasks)))
+        for k, i in enumerate(chunk):
+            envs[k].reset(options={"state": tasks[i][0], "goals": tasks[i][1]})
+        states = [[tasks[i][0]] for i in chunk]
+        done = [False] * len(chunk)
+        for t in range(max(len(plans[i]) for i in chunk)):
+            ks = [k for k, i in enumerate(chunk) if not done[k] and t < len(plans[i])]
+            if not ks:
+                break
+            outcomes = simulate(envs, ks, [plans[chunk[k]][t] for k in ks])
+            for k, outcome in zip(ks, outcomes):
+                done[k] = envs[k].finish_step(outcome)[2]                  # terminated: success
+                states[k].append(envs[k].get_state())
+        for k, i in enumerate(chunk):
+            played = np.asarray(plans[i])[:len(states[k]) - 1]
+            out.append(Trajectory(tasks[i][1], np.stack(states[k]), played, done[k]))
+    return out
 
 
 def success_rate(trajs):
