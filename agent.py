@@ -233,6 +233,11 @@ class Agent:
         self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
         self.threads = 1        # threads for a minibatch's parts (shards.py): same results for any
 
+    @property
+    def drops(self):
+        """True when made for the world that drops (one y choice: physics finds the height)."""
+        return self.n_y == 1
+
     def features(self, obs):
         """obs (B, n, 6) -> (B, n, F) in the networks' dtype; checks the number of blocks."""
         obs = np.asarray(obs, dtype=np.float64)

@@ -37,15 +37,9 @@ from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Confi
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, observation, on_same_spot
 from taskexp_lib.labels import labelled
 from taskexp_lib.nn import mlp_backward
+from taskexp_lib.orders import other_orders, with_other_orders
 from taskexp_lib.report import order_stats, task_stats
-from taskexp_lib.rollout import (
-    Trajectory,
-    physics_pool,
-    replay,
-    run_episodes,
-    run_worlds,
-    success_rate,
-)
+from taskexp_lib.rollout import Trajectory, physics_pool, run_episodes, run_worlds, success_rate
 from taskexp_lib.shapes import eval_tasks
 from taskexp_lib.shards import SHARDS, read_only_map
 
@@ -308,40 +302,14 @@ def relabel(traj, env):
     return Trajectory(goals, traj.states[: T + 1], traj.actions[:T], True)
 
 
-def other_orders(demos, envs, rng):
-    """Not in the paper: each demonstration's moves in another order that physics allows.
-
-    A demonstration shows one order of its moves, and BC learns that order's habits with it. A
-    joined one moves the blocks of s0 -> sT first and g*'s after, so where g*'s new goal does not
-    depend on them (a block put on a free table spot, say) the data insist on "the goals already
-    met first", which is "the higher goal first" whenever the base task put its block on
-    another; and every round passes on the order the last round's policy happened to choose.
-    Here the moves of each demonstration are replayed from s0 in a random other order (the
-    reverse, where the draw gives its own): where the simulator meets the same goals, that order
-    is kept too (demo.other_order), so the only order the data insist on is the one physics
-    demands, a support before what it carries. Like relabelling, a use of the simulator, not a
-    rule. Returns how many other orders were kept.
-    """
-    moved = [d for d in demos if len(d.actions) > 1]
-    plans = []
-    for d in moved:
-        order = rng.permutation(len(d.actions))
-        if (order == np.arange(len(order))).all():
-            order = order[::-1]
-        plans.append(d.actions[order])
-    others = replay([(d.states[0], d.goals) for d in moved], plans, envs)
-    for demo, other in zip(moved, others):
-        demo.other_order = other if other.success else None
-    return sum(other.success for other in others)
-
-
 def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=silent):
     """One round of sec 4.2. tasks: the previous round's tasks. Returns (demos, info).
 
     1. run the policy on the tasks and keep the successful trajectories s0 -> sT;
     2. for each, draw K candidates with one alteration and pick g* by equation (1);
     3. run the policy from sT toward g*: on success the joined trajectory demonstrates s0 -> g*,
-       on failure the joined trajectory is relabelled with the goal it did reach.
+       on failure the joined trajectory is relabelled with the goal it did reach;
+    4. not in the paper: the moves of each also in another order that physics allows (orders.py).
     """
     env, pieces = envs[0], pieces or Pieces()
     batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
@@ -389,11 +357,6 @@ class RunState:
     all_tasks: list = None              # every task so far, newest buffer_size: PPO replays some
     prev_tasks: list = None             # the tasks that the next task expansion starts from
     results: dict = field(default_factory=dict)    # config, one record per round, wall-clock
-
-
-def with_other_orders(demos):
-    """The demonstrations, each followed by its task in the other order where there is one."""
-    return [t for d in demos for t in (d, d.other_order) if t is not None]
 
 
 def demo_arrays(demos):
@@ -473,18 +436,16 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
                                cfg.label_later_epochs))
     demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces, bar)
     stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
-    stats.update(order_stats(with_other_orders(demos)))     # the order the actor's data teach
+    stats.update(order_stats(with_other_orders(demos)))
     runs = info["successful"] * (2 if cfg.hard_picks else 1)      # verification runs from s_T
     unusable = runs - info["joined"] - info["relabelled"]
     log(f"  {info['attempts']} attempts, {info['successful']} successful, {runs} runs from s_T: "
         f"{info['joined']} joined, {info['relabelled']} relabelled, {unusable} unusable "
         f"({info['picks_reached']:.0%} of the picks reached); "
         f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
-    if cfg.other_orders:
-        log(f"  {info['other_orders']} of them in another order too, as physics allows")
-    if stats["higher_first"] is not None:
-        log(f"  {stats['higher_first']:.0%} of the {stats['multi_layer_steps']} demonstrated steps "
-            "with goals pending on several layers move a higher goal first")
+    if stats["higher_first"] is not None:          # the order the actor's data teach (report.py)
+        log(f"  {info['other_orders']} also in another order; {stats['higher_first']:.0%} of the "
+            f"{stats['multi_layer_steps']} steps with goals on several layers move a higher one")
     record["expansion"] = info
     if demos:
         record.update(self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar, log))
@@ -498,11 +459,6 @@ def make_agent(cfg, mlp_backward=mlp_backward):
     return Agent(cfg.n_blocks, n_x=N_X, n_y=1 if cfg.action == "drop" else cfg.n_blocks,
                  hidden=cfg.hidden, seed=cfg.seed, mlp_backward=mlp_backward, dtype=cfg.dtype,
                  network=cfg.network, features=cfg.features)
-
-
-def drops(agent):
-    """True when `agent` was made for the world that drops (make_agent gives it one y choice)."""
-    return agent.n_y == 1
 
 
 def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=silent, log=print,

@@ -64,7 +64,7 @@ def measure(checkpoint, seed=0, episodes=100):
     {kind: share}, first_wrong_step: mean step, success: share}}."""
     agent = Agent.load(checkpoint)
     cfg = taskexp.Config(seed=run_seed(checkpoint, seed), eval_episodes=episodes,
-                         action="drop" if taskexp.drops(agent) else "place")
+                         action="drop" if agent.drops else "place")
     envs, _ = run_worlds(cfg)
     out = {}
     for shape, tasks in eval_tasks(cfg, envs[0]).items():

@@ -27,7 +27,7 @@ def main():
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args()
     agent = Agent.load(a.agent) if a.agent else None
-    env = BlockWorld(6, drop=agent is not None and taskexp.drops(agent))
+    env = BlockWorld(6, drop=agent is not None and agent.drops)
     rng = np.random.default_rng(a.seed)
     names = list(shapes.SHAPES)
     fig = Figure(figsize=(4.2 * len(names), 4.6))

@@ -44,7 +44,7 @@ def measure(checkpoint, tasks=600, seed=5, select="ours", restrict=True):
     """The diagnostic for one checkpoint, picking by `select` among candidates drawn with or
     without the restriction -> dict of the shares (0..1) and counts it prints."""
     agent = Agent.load(checkpoint)
-    drop = taskexp.drops(agent)
+    drop = agent.drops
     cfg = taskexp.Config(features=agent.feature_set, network=agent.network,
                          action="drop" if drop else "place", select=select, restrict=restrict)
     rng = np.random.default_rng(seed)

@@ -8,10 +8,12 @@
     python bench/headline.py --readme README.md # and write it into the README between its markers
 
 --keep copies each finished run's results.json, with its round-0 critic's feasibility
-(bench/feasible_goals.py, 600 base tasks, with the run's own selection rule, measured once and
-cached in the run's folder) and this machine's name (keep runs where they were made), to
-results/runs/<run>.json. Those copies are committed: the headline is made from them alone, and
-tests/test_bench.py checks that the README shows exactly what they say.
+(bench/feasible_goals.py, 600 base tasks, with the run's own selection rule) and each round's
+first moves (bench/build_order.py), both measured once and cached in the run's folder, and
+this machine's name (keep runs where they were made), to results/runs/<run>.json. Those copies
+are committed: the headline is made from them alone, and tests/test_bench.py checks that the
+README shows exactly what they say. results/runs/main-9032628/ keeps the runs of the code before
+2026-12-05 (its default then, the relations, the ablations), for comparison.
 """
 import argparse
 import json
@@ -40,6 +42,7 @@ def keep(run_dirs, kept=KEPT, tasks=600):
             raise SystemExit(f"{out}: not finished ({len(results['rounds']) - 1} of "
                              f"{results['config']['rounds']} rounds)")
         results.update(feasible=reproduce.feasibility(out, results["config"], tasks),
+                       build_order=reproduce.first_moves(out, results["config"]["rounds"]),
                        machine=reproduce.machine())
         path = os.path.join(kept, os.path.basename(os.path.normpath(out)) + ".json")
         with open(path, "w") as f:
@@ -53,17 +56,11 @@ def load_all(kept=KEPT):
 
 
 VARIANTS = (("ours", "the default"),
-            ("ours-later1000", "`--label-later-tasks 1000 --label-later-epochs 6`: a sixth of "
-             "the later labelling"),
             ("ours-nolabels", "`--label-tasks 0`: V(s, g) from PPO alone, as in the paper"),
-            ("init2new", "`--select init2new`: argmin V(s0, g), Table 3's ablation"),
-            ("ours-hard", "`--hard-picks`: from each s_T, init2new's pick verified as well"),
-            ("ours-expand6000", "`--expand-episodes 6000`: as many runs from s_T as "
-             "`--hard-picks`, all toward equation (1)'s picks"),
-            ("ours-relations", "`--features relations`: the stacking relations computed by hand "
-             "as features"),
-            ("ours-h64", "`--hidden 64`: networks half as wide, the width of the authors' "
-             "state-based settings"))
+            ("main-9032628/ours", "the default before 2026-12-05 (main 9032628: base goals "
+             "anywhere, one order per demonstration, layer codes, later labels)"),
+            ("main-9032628/ours-relations", "the same with the stacking relations computed by "
+             "hand as features (`--features relations`)"))
 # Table 3's rows beside ours, each the default with one flag (run_seeds.FLAGS), kept as
 # run_seeds.kept_name names them (no-restrict: ours-norestrict-seedS)
 ABLATIONS = ("end2new", "init2new", "no-restrict", "direct-ppo")
@@ -91,6 +88,8 @@ def headline(by_variant):
         runs = by_variant.get(name)
         if not runs:
             continue
+        if [r["config"]["seed"] for r in runs] != [r["config"]["seed"] for r in ours]:
+            label += " (seeds " + ", ".join(str(r["config"]["seed"]) for r in runs) + ")"
         cells = [pm([success(r, k) for r in runs], "%") for k in earlier]
         cells += [pm([success(r, rounds, s) for r in runs], "%") for s in shapes]
         zero_shot.append(f"| {label} | {' | '.join(cells)} | "

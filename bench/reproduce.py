@@ -30,9 +30,10 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import build_order  # noqa: E402
 from run_seeds import KEPT, kept_name, load, pm, run_dir, run_one  # noqa: E402
 
-from taskexp_lib.config import Config  # noqa: E402
+from taskexp_lib.config import Config, saved_config  # noqa: E402
 from taskexp_lib.report import DPI, FIGURES, histogram_figure  # noqa: E402
 
 # The paper's numbers (shared/paper/README.md): Table 1 by round 1-3, Table 2 by round 1-3,
@@ -86,6 +87,39 @@ def feasibility(out, cfg, tasks):
         return json.load(f)
 
 
+def first_moves(out, rounds, episodes=100):
+    """The actor's leading indicator (bench/build_order.py) on each round's checkpoint of the
+    run in `out` -> {round: {shape: {"first_move": {kind: share}, ...}}}. Kept in the run's folder
+    as feasibility is."""
+    path = os.path.join(out, "build_order.json")
+    if not os.path.exists(path):
+        script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "build_order.py")
+        checkpoints = [os.path.join(out, f"round{k}.npz") for k in range(rounds + 1)]
+        subprocess.run([sys.executable, script, *checkpoints, "--episodes", str(episodes),
+                        "--json", path], check=True, capture_output=True)
+    with open(path) as f:
+        by_checkpoint = json.load(f)
+    return {str(k): by_checkpoint[c] for k, c in enumerate(sorted(
+        by_checkpoint, key=lambda c: int(os.path.basename(c)[5:-4])))}
+
+
+def right_first(run, k, shape):
+    """The share (%) of the evaluation scenes whose first move after round k is "right"."""
+    return 100 * run["build_order"][str(k)][shape]["first_move"]["right"]
+
+
+def table_first_moves(runs, rounds, shapes):
+    """The actor's indicator round by round, mean +- std over seeds."""
+    out = ["| round |" + "".join(f" {s}: right / higher goal |" for s in shapes),
+           "|---" * (1 + len(shapes)) + "|"]
+    for k in range(rounds + 1):
+        cell = lambda s, kind: pm([100 * r["build_order"][str(k)][s]["first_move"][kind]
+                                   for r in runs], "%")
+        out.append(f"| {k} |" + "".join(f" {cell(s, 'right')} / {cell(s, 'higher goal')} |"
+                                        for s in shapes))
+    return out
+
+
 def table_feasible(runs):
     """The leading indicator: the round-0 critic's picks, mean +- std over seeds."""
     cell = lambda key: pm([100 * r["feasible"][key] for r in runs], "%")
@@ -128,52 +162,58 @@ def table2(runs, rounds, shapes, with_paper=True):
 def table3(by_variant, k, shapes):
     out = [f"| after round {k} |" + "".join(f" {s} | paper |" for s in shapes)
            + " mean | its picks reached |", "|---" * (3 + 2 * len(shapes)) + "|"]
+    seeds = lambda runs: [r["config"]["seed"] for r in runs]
     for v, runs in by_variant.items():
+        name = NAMES[v] + ("" if seeds(runs) == seeds(by_variant["ours"]) else
+                           " (seeds " + ", ".join(map(str, seeds(runs))) + ")")
         cells = "".join(f" {pm([success(r, k, s) for r in runs], '%')} | "
                         f"{PAPER_T3[v][i]:.1f}% |" for i, s in enumerate(shapes))
-        out.append(f"| {NAMES[v]} |{cells} {pm([success(r, k) for r in runs], '%')} | "
+        out.append(f"| {name} |{cells} {pm([success(r, k) for r in runs], '%')} | "
                    f"{picks_reached([r['rounds'][k] for r in runs])} |")
     return out
 
 
 def targets(by_variant, rounds, shapes):
-    """The targets, each with what was measured and whether it holds (on seed means)."""
+    """The targets of 2026-12-05, each with what was measured and whether it holds (seed means)."""
     ours = by_variant["ours"]
-    layers = [np.mean([mean_layer(r["rounds"][k]["max_height_hist"]) for r in ours])
-              for k in range(1, rounds + 1)]
-    high = [np.mean([r["rounds"][k]["high_goal_tasks"] for r in ours]) for k in (1, rounds)]
-    zs = [np.mean([success(r, k) for r in ours]) for k in (1, rounds)]
-    per_shape = {s: [np.mean([success(r, k, s) for r in ours]) for k in (1, rounds)]
-                 for s in shapes}
-    out = [("mean highest-goal layer of generated tasks rises every round (rounds 1..%d)" % rounds,
-            " -> ".join(f"{v:.2f}" for v in layers), all(np.diff(layers) > 0)),
-           (f"tasks with >= 3 high goals grow >= 5x from round 1 to {rounds}",
-            f"{high[0]:.0f} -> {high[1]:.0f}",
-            high[0] > 0 and high[1] >= 5 * high[0]),          # 0 -> 81 is no multiple of 0
-           (f"zero-shot success rises from round 1 to {rounds} on every shape",
-            ", ".join(f"{s} {a:.0f}% -> {b:.0f}%" for s, (a, b) in per_shape.items()),
-            all(b > a for a, b in per_shape.values())),
-           (f"round-{rounds} mean over shapes >= 77% (the paper's round-3 mean)",
-            f"{zs[1]:.0f}%", zs[1] >= 77),
-           (f"round-{rounds} mean over shapes: spread over seeds <= 10 points",
-            f"{np.std([success(r, rounds) for r in ours]):.0f} points",
-            np.std([success(r, rounds) for r in ours]) <= 10)]
+    mean = lambda k, runs=ours, shape=None: np.mean([success(r, k, shape) for r in runs])
+    zs = [mean(k) for k in range(rounds + 1)]
+    paper_means = [np.mean([PAPER_T2[s][k] for s in shapes]) for k in range(rounds)]
+    spread = np.std([success(r, rounds) for r in ours])
+    high = [np.mean([r["rounds"][k]["high_goal_tasks"] for r in ours]) for k in (0, rounds)]
+    out = [(f"zero-shot mean over shapes >= the paper's, round {k}", f"{zs[k]:.0f}% vs "
+            f"{paper_means[k - 1]:.0f}%", zs[k] >= paper_means[k - 1])
+           for k in range(1, rounds + 1)]
+    out += [(f"round-{rounds} mean over shapes: spread over seeds <= 10 points",
+             f"{spread:.0f} points", spread <= 10),
+            (f"every shape >= 60% after round {rounds}",
+             ", ".join(f"{s} {mean(rounds, shape=s):.0f}%" for s in shapes),
+             all(mean(rounds, shape=s) >= 60 for s in shapes)),
+            ("the mean never falls from one round to the next",
+             " -> ".join(f"{z:.0f}%" for z in zs), all(np.diff(zs) >= 0)),
+            (f"tasks with >= 3 high goals >= 300 in round {rounds}, rising from round 0",
+             f"{high[0]:.0f} -> {high[1]:.0f}", high[1] >= 300 and high[1] > high[0])]
+    if all("build_order" in r for r in ours):
+        worst = min(np.mean([right_first(r, k, s) for r in ours])
+                    for k in range(1, rounds + 1) for s in shapes)
+        out.append(("first move right >= 90% of each shape's scenes after every round from 1 "
+                    "(bench/build_order.py; lowest shown)", f"{worst:.0f}%", worst >= 90))
     if all("feasible" in r for r in ours):
         picks = np.mean([100 * r["feasible"]["feasible_picks"] for r in ours])
         out.insert(0, ("feasible among equation (1)'s picks, round-0 critic >= 75%",
                        f"{picks:.0f}%", picks >= 75))
-    if "direct-ppo" in by_variant:
-        worst = {s: max(success(r, k, s) for r in by_variant["direct-ppo"]
-                        for k in range(1, rounds + 1)) for s in shapes}
-        out.append(("direct PPO <= 10% on every shape, every round (highest seed shown)",
-                    ", ".join(f"{s} {v:.0f}%" for s, v in worst.items()),
-                    max(worst.values()) <= 10))
-    for v in ("no-restrict", "init2new"):
+    if "direct-ppo" in by_variant:           # after the last round direct PPO was run for
+        k = min(rounds, len(by_variant["direct-ppo"][0]["rounds"]) - 1)
+        theirs = {s: mean(k, by_variant["direct-ppo"], s) for s in shapes}
+        out.append((f"ours above direct PPO on every shape after round {k}",
+                    ", ".join(f"{s} {mean(k, shape=s):.0f}% vs {v:.0f}%"
+                              for s, v in theirs.items()),
+                    all(mean(k, shape=s) > v for s, v in theirs.items())))
+    for v, strict in (("no-restrict", True), ("init2new", True), ("end2new", False)):
         if v in by_variant:
-            for k in sorted({1, len(by_variant[v][0]["rounds"]) - 1}):
-                a, b = (np.mean([success(r, k) for r in by_variant[x]]) for x in ("ours", v))
-                out.append((f"ours >= {NAMES[v]} on the mean over shapes, round {k}",
-                            f"{a:.0f}% vs {b:.0f}%", a >= b))
+            a, b = mean(1), mean(1, by_variant[v])
+            out.append((f"ours {'>' if strict else '>='} {NAMES[v]} on the mean over shapes, "
+                        "round 1", f"{a:.0f}% vs {b:.0f}%", a > b if strict else a >= b))
     return ["| target | measured (mean over seeds) | |", "|---|---|---|"] + \
         [f"| {t} | {m} | {'met' if ok else '**missed**'} |" for t, m, ok in out]
 
@@ -197,6 +237,8 @@ def main():
     p.add_argument("--rounds", type=int, default=Config.rounds)
     p.add_argument("--ablation-rounds", type=int, default=1,
                    help="rounds of end2new, init2new and w/o restriction (Table 3)")
+    p.add_argument("--direct-rounds", type=int, default=Config.rounds,
+                   help="rounds of direct PPO (--kept: as many as the kept runs have)")
     p.add_argument("--root", default="runs")
     p.add_argument("--jobs", type=int, default=2, help="runs at a time (one core each)")
     p.add_argument("--scale", default=None, help="passed to taskexp.py (smaller budgets)")
@@ -212,16 +254,18 @@ def main():
     shapes = list(Config.shapes)
     start = time.time()
     jobs = [(f, v, s) for f in a.features for v in a.variants for s in a.seeds]
-    rounds_of = lambda v: a.rounds if v in ("ours", "direct-ppo") else a.ablation_rounds
+    rounds_of = lambda v: {"ours": a.rounds, "direct-ppo": a.direct_rounds}.get(v,
+                                                                             a.ablation_rounds)
     # --kept: each variant's kept runs read once, by seed (the relations' runs: ours-relations)
     by_seed = {(f, v): {r["config"]["seed"]: r for r in load(kept_name(v, f), a.kept)}
                for f in a.features for v in a.variants} if a.kept else {}
-    if a.kept:        # the other feature set may be kept for fewer variants: report those
-        jobs = [(f, v, s) for f, v, s in jobs if f == Config.features or by_seed[f, v]]
+    if a.kept:        # the other feature set, and the ablations, may be kept for fewer seeds
+        jobs = [(f, v, s) for f, v, s in jobs if s in by_seed[f, v] or (
+            f == Config.features and (v == "ours" or not by_seed[f, v]))]    # kept(): missing
 
     def kept(job):
         f, v, s = job
-        r, rounds = by_seed[f, v].get(s), rounds_of(v)
+        r, rounds = by_seed[f, v].get(s), a.rounds if v == "ours" else 1    # as many as kept
         if r is None or r["config"]["features"] != f or len(r["rounds"]) <= rounds:
             raise SystemExit(f"{a.kept} keeps no {f} {v} run of seed {s} with {rounds} rounds: "
                              f"make it (bench/run_seeds.py) and keep it (bench/headline.py)")
@@ -234,9 +278,10 @@ def main():
         extra = ["--features", f] + (["--scale", a.scale] if a.scale else [])
         print(f"[{time.time() - start:5.0f}s] {f} {v} seed {s}", flush=True)
         results = run_one(v, s, rounds_of(v), root, extra)[2]
-        if v == "ours":                   # the critic's leading indicator, on its round-0 copy
+        if v == "ours":                   # the leading indicators: the critic's, the actor's
             results["feasible"] = feasibility(run_dir(v, s, root), results["config"],
                                               max(50, int(600 * float(a.scale or 1))))
+            results["build_order"] = first_moves(run_dir(v, s, root), rounds_of(v))
         return job, results
 
     if a.kept:
@@ -255,8 +300,9 @@ def main():
           "Results differ between machines (BLAS kernels differ), so compare spreads, not one "
           "seed's digits.", ""]
     for f in a.features:
-        by_variant = {v: [done[(f, v, s)] for s in a.seeds] for v in a.variants
-                      if (f, v, a.seeds[0]) in done}
+        by_variant = {v: [done[(f, v, s)] for s in a.seeds if (f, v, s) in done]
+                      for v in a.variants}
+        by_variant = {v: runs for v, runs in by_variant.items() if runs}
         if not by_variant:
             print(f"{a.kept} keeps no {f} runs: RESULTS.md leaves them out")
             continue
@@ -282,9 +328,25 @@ def main():
             fig.savefig(path, dpi=DPI)
             md += [f"{title}:", "", f"![{title}]({path})", ""]
         md += ["### Table 2: zero-shot success (ours)", "", *table2(ours, a.rounds, shapes), ""]
+        if all("build_order" in r for r in ours):
+            md += ["### The order of the moves (bench/build_order.py)", "",
+                   "The greedy policy's first move on the evaluation scenes after each round: "
+                   "a block of the lowest layer still to build, at its goal's x (right), or a "
+                   "block whose goal lies above one still to build (higher goal):", "",
+                   *table_first_moves(ours, a.rounds, shapes), ""]
         if "direct-ppo" in by_variant:
+            direct = by_variant["direct-ppo"]
             md += ["### Direct PPO on the evaluation tasks (sec 5.3; paper: 0%)", "",
-                   *table2(by_variant["direct-ppo"], a.rounds, shapes, with_paper=False), ""]
+                   *table2(direct, len(direct[0]["rounds"]) - 1, shapes, with_paper=False), ""]
+        if f == Config.features:
+            run_cfg = saved_config(ours[0]["config"])     # the scenes the runs were tried on
+            luck = build_order.chance(run_cfg, orders=10)
+            md += ["Chance level (`build_order.chance`): the base skill done perfectly, each "
+                   "goal block dropped once at its goal's x in a random order, played in the "
+                   f"world (10 orders on each of the {run_cfg.eval_episodes} evaluation scenes "
+                   "per shape): "
+                   + ", ".join(f"{s} {100 * v:.1f}%" for s, v in luck.items())
+                   + ". Only the orders that build every support first succeed.", ""]
         if len(by_variant) == 1:                          # ours alone: no ablation kept
             continue
         md += ["### Table 3: goal selection and the restriction", ""]

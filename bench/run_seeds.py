@@ -26,7 +26,7 @@ FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--
          "no-labels": ["--label-tasks", "0"], "hard-picks": ["--hard-picks"],
          "expand6000": ["--expand-episodes", "6000"], "relations": ["--features", "relations"],
          "hard-expand6000": ["--hard-picks", "--expand-episodes", "6000"],
-         "hidden64": ["--hidden", "64"]}
+         "hidden64": ["--hidden", "64"], "later2000": ["--label-later-tasks", "2000"]}
 
 
 # finished runs' results.json, copied by bench/headline.py --keep and committed
@@ -34,7 +34,8 @@ KEPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
 # as taskexp.py names its default directories
 DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels", "hard-picks": "ours-hard",
         "expand6000": "ours-expand6000", "relations": "ours-relations",
-        "hard-expand6000": "ours-hard-expand6000", "hidden64": "ours-h64"}
+        "hard-expand6000": "ours-hard-expand6000", "hidden64": "ours-h64",
+        "later2000": "ours-later2000"}
 
 
 def kept_name(variant, features=Config.features):

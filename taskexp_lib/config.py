@@ -105,7 +105,7 @@ class Config:
     other_orders: bool = True
     """sec 4.2, not in the paper: BC learns each generated demonstration's moves in another order
     too, where the simulator, replaying them so from s_0, meets the same goals; the data then
-    insist only on the order that physics demands (taskexp.other_orders)"""
+    insist only on the order that physics demands (taskexp_lib/orders.py)"""
 
     label_tasks: int = 2000
     """not in the paper: labelled outcomes as data for V(s, g) (taskexp_lib/labels.py), on this
@@ -114,9 +114,9 @@ class Config:
     on the discounted outcomes"""
     label_later_tasks: int = 0
     """label_tasks: label before every later task expansion too, on this many of the tasks it
-    starts from (the last round's new ones); 0 = only after the base PPO (the default: with the
-    data in the order physics demands, later labels cost half the run and bought no zero-shot
-    success, RESULTS.md)"""
+    starts from (the last round's new ones); 0 = only after the base PPO. Off by default since
+    2026-12-05: with free table spots, 2000 later labels took most of rounds 1-3's time and left
+    seed 0 lower after round 2 (39% zero-shot against 51% without; one seed, bench/discussion.md)"""
     label_later_epochs: int = 30
     """label_later_tasks: epochs of those later value regressions (split as label_epochs is).
     (30 was the default's until 2026-12-04, with 2000 later tasks)"""

@@ -252,7 +252,7 @@ def test_plain_features_are_the_relations_features_without_the_relations(tmp_pat
     features its networks were trained on, and a one-block drop head (n_y = 1) round-trips."""
     obs = random_obs(np.random.default_rng(5), 3)
     plain, full = featurize(obs, 6, "plain"), featurize(obs, 6, "relations")
-    assert plain.shape[-1] == 10 + 2 * 6 + 2 * 21
+    assert plain.shape[-1] == 10 + 2 * 21
     assert np.array_equal(plain, full[..., : plain.shape[-1]])
     assert set(feature_columns(6, "relations")) - set(feature_columns(6, "plain")) == {*RELATIONS,
                                                                           "support_wanted_rbf"}

@@ -1,6 +1,6 @@
 """The order in which blocks are moved: the moves sorted by report.move_kind, the share of
 demonstrated steps that move a higher goal first (report.order_stats), plans replayed in the world
-(rollout.replay), the other order of a joined demonstration (taskexp.other_orders), and the
+(rollout.replay), the other order of a joined demonstration (orders.other_orders), and the
 leading indicator bench/build_order.py."""
 import os
 import sys
@@ -11,6 +11,7 @@ import pytest
 import taskexp
 from agent import Agent
 from env2d import BlockWorld
+from taskexp_lib import orders
 from taskexp_lib.geometry import BLOCK_W, nearest_x_bin
 from taskexp_lib.report import MOVE_KINDS, move_kind, order_stats
 from taskexp_lib.rollout import Trajectory, replay
@@ -89,13 +90,13 @@ def test_other_orders_keeps_only_the_orders_physics_allows(world):
     tasks = [(s0, commuting), (s0, dependent), (s0, goals), (s0, {0: goals[0]})]
     demos = replay(tasks, plans, [env])
     assert all(d.success for d in demos)
-    assert taskexp.other_orders(demos, [env], np.random.default_rng(0)) == 1
+    assert orders.other_orders(demos, [env], np.random.default_rng(0)) == 1
     other = demos[0].other_order
     assert other.success and [int(a[0]) for a in other.actions] == [3, 0]
     assert np.array_equal(other.states[0], s0) and other.goals == commuting
     assert all(d.other_order is None for d in demos[1:])
-    assert len(taskexp.with_other_orders(demos)) == 5
-    assert order_stats(taskexp.with_other_orders(demos[:1]))["multi_layer_steps"] == 0
+    assert len(orders.with_other_orders(demos)) == 5
+    assert order_stats(orders.with_other_orders(demos[:1]))["multi_layer_steps"] == 0
 
 
 def test_build_order_sorts_the_first_moves_of_a_checkpoint(tmp_path):

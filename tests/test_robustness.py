@@ -171,16 +171,18 @@ def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
 
 def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path):
     """Settings saved before label_every_round became label_later_tasks and label_later_epochs,
-    and before hard_picks existed, still resume (config.upgraded), to the results of a run never
-    stopped."""
+    and before hard_picks and other_orders existed, still resume (config.upgraded), to the results
+    of a run never stopped."""
     old, new = str(tmp_path / "old"), str(tmp_path / "new")
-    cli.main(["--rounds", "1", *TINY, "--out", old])
+    before = ["--label-later-tasks", "2000", "--no-other-orders"]      # what the code then did
+    cli.main(["--rounds", "1", *TINY, *before, "--out", old])
 
     def as_before(settings):                       # the settings as the code before saved them
         settings = dict(settings, label_every_round=settings["label_later_tasks"] > 0)
         assert settings.pop("label_later_tasks") == settings["label_tasks"]
         assert settings.pop("label_later_epochs") == settings["label_epochs"]
         assert settings.pop("hard_picks") is False
+        assert settings.pop("other_orders") is False
         return settings
     with open(os.path.join(old, "results.json")) as f:
         results = json.load(f)
@@ -192,7 +194,7 @@ def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path):
     state["results"] = np.array(json.dumps(dict(saved, config=as_before(saved["config"]))))
     checkpoint.save_npz(os.path.join(old, "state.npz"), state)
     cli.main(["--resume", "--rounds", "2", "--out", old])
-    cli.main(["--rounds", "2", *TINY, "--out", new])
+    cli.main(["--rounds", "2", *TINY, *before, "--out", new])
     assert results_without_clock(old) == results_without_clock(new)
 
 

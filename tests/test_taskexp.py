@@ -173,15 +173,15 @@ def test_top_candidates_follow_equation_1_and_outcomes_are_discounted():
 
 
 def test_labelled_outcomes_for_v_are_recorded_and_reproducible(tmp_path):
-    """On by default: after the base PPO (round 0), then before every expansion but round 1's
-    (which round 0's labels serve) with their own budget, none after the last round; --scale
-    shrinks them; 0 is off (--label-later-tasks 0: after the base PPO only)."""
+    """On by default after the base PPO (round 0); with --label-later-tasks, also before every
+    expansion but round 1's (which round 0's labels serve) with their own budget, none after the
+    last round; --scale shrinks them; 0 is off."""
     flags = ("--rounds", "2", "--label-iters", "2", "--label-epochs", "2",
-             "--label-later-epochs", "6")
+             "--label-later-tasks", "2000", "--label-later-epochs", "6")
     runs = [run_cli(tmp_path / name, *flags) for name in ("a", "b")]
     config, rounds = runs[0][1]["config"], runs[0][1]["rounds"]
     assert config["label_tasks"] == round(0.02 * taskexp.Config().label_tasks)
-    assert config["label_later_tasks"] == round(0.02 * taskexp.Config().label_later_tasks)
+    assert config["label_later_tasks"] == round(0.02 * 2000)
     assert rounds[0]["label_runs"] > 0 and len(rounds[0]["label_loss"]) == 1
     assert 0 <= rounds[0]["label_success"] <= 1
     assert "label_runs" not in rounds[1] and rounds[2]["label_runs"] > 0
@@ -205,7 +205,7 @@ def test_cli_network_features_and_action_reach_the_agent(tmp_path, flags, networ
     agent = Agent.load(os.path.join(out, "round1.npz"))
     assert (agent.network, agent.feature_set, agent.n_y) == (network, features, n_y)
     assert res["config"]["action"] == ("drop" if n_y == 1 else "place")
-    assert agent.features(np.zeros((1, 6, 6))).shape[-1] == (64 if features == "plain" else 90)
+    assert agent.features(np.zeros((1, 6, 6))).shape[-1] == (52 if features == "plain" else 78)
 
 
 @pytest.mark.parametrize("flags", [["--select", "init2new", "--no-restrict"],
