@@ -17,6 +17,8 @@ to it at every step (as good as a new pymunk Space, see BlockWorld._load), so a 
 taskexp_lib/geometry.py, its pictures in taskexp_lib/draw.py.
 """
 import math
+from contextlib import nullcontext
+from functools import partial
 
 import gymnasium
 import numpy as np
@@ -42,6 +44,7 @@ from taskexp_lib.geometry import (
     observation,
     same_spot,
 )
+from taskexp_lib.rollout import PhysicsPool, Worlds
 
 # Physics. Measured with pymunk 7.3.1: thin segments let blocks tunnel (hence a thick table box);
 # a 0.5 mm drop gap avoids the spin of a block born touching another; the default slop is far too
@@ -58,7 +61,7 @@ DROP_GAP = 0.0005                           # teleport this far above the layer 
 FLOOR_Y = -0.5                              # the catch floor under the table
 # Rest: REST_SUBSTEPS consecutive substeps with |v| < REST_V, |w| < REST_W and no point of any
 # block further than REST_MOVE from where it was when the quiet run began; at most MAX_SUBSTEPS
-# (20 s; see _settle, and bench/bench_settle.py for how far below it actions stay).
+# (20 s; see _settle, and lab/bench/bench_settle.py for how far below it actions stay).
 REST_V, REST_W, REST_MOVE, REST_SUBSTEPS, MAX_SUBSTEPS = 0.01, 0.05, 0.0005, 10, 1200
 CHECK_EVERY = 5                             # read the bodies every 5th substep
 # a rotation dtheta moves a corner by <= HALF_DIAG * dtheta
@@ -474,5 +477,24 @@ def _free_segments(goal_xs):
     return segments
 
 
-# `gymnasium.make("taskexp/BlockWorld-v0", n_blocks=7)` builds a BlockWorld (keywords pass through).
-gymnasium.register(id="taskexp/BlockWorld-v0", entry_point=BlockWorld)
+# `gymnasium.make("taskexp/BlockWorld-v0")` builds the world every run of the method uses, the one
+# that drops (keywords pass through: n_blocks=7, or drop=False for the world that places).
+gymnasium.register(id="taskexp/BlockWorld-v0", entry_point=BlockWorld, kwargs=dict(drop=True))
+
+
+# ---- the worlds of a run: many at once, their physics in worker processes (rollout.py) ----
+
+def physics_pool(workers, n_blocks, drop=False):
+    """A PhysicsPool of BlockWorlds for workers > 1; with one, the main process steps the worlds
+    itself."""
+    make_world = partial(BlockWorld, n_blocks, drop=drop)       # picklable, for "spawn"
+    return PhysicsPool(workers, make_world) if workers > 1 else nullcontext()
+
+
+def run_worlds(cfg, pool=None):
+    """The worlds of a run with settings cfg -> (envs, short_envs): cfg.n_envs each, episodes of
+    cfg.max_steps actions, and of cfg.short_steps for verification, labels and stretch tasks."""
+    worlds = lambda steps: Worlds([BlockWorld(cfg.n_blocks, max_steps=steps,
+                                              drop=cfg.action == "drop")
+                                   for _ in range(cfg.n_envs)], pool)
+    return worlds(cfg.max_steps), worlds(cfg.short_steps)

@@ -13,13 +13,13 @@
 
 A task is a pair (s0, goals): a state array (n_blocks, 6) and a dict {block: (x, y)}.
 The hyperparameters are in taskexp_lib/config.py, the batched episodes in taskexp_lib/rollout.py;
-the plumbing (arguments, run directory, checkpoints, resume, progress, tables and figures) in
-taskexp_lib/cli.py. `python taskexp.py --rounds 3` runs taskexp_lib.cli.main().
+the plumbing above the method (arguments, run directory, resume, progress, tables and figures)
+in the package taskexp_cli. `python taskexp.py --rounds 3` runs taskexp_cli.main().
 """
 # `python taskexp.py` hands over to the CLI, which imports this file as taskexp: so the method is
 # defined once, rather than once more as __main__.
 if __name__ == "__main__":
-    from taskexp_lib.cli import main
+    from taskexp_cli import main
     raise SystemExit(main())
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -31,17 +31,17 @@ from tqdm import tqdm
 
 import agent as agent_lib
 from agent import Agent
-from env2d import drop_height
+from env2d import drop_height, physics_pool, run_worlds
 from taskexp_lib import one_blas_thread, rollout
 from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Config, a run's settings)
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, observation, on_same_spot
 from taskexp_lib.labels import labelled
 from taskexp_lib.nn import mlp_backward
 from taskexp_lib.orders import other_orders, with_other_orders
-from taskexp_lib.report import order_stats, task_stats
-from taskexp_lib.rollout import Trajectory, physics_pool, run_episodes, run_worlds, success_rate
+from taskexp_lib.rollout import Trajectory, run_episodes, success_rate
 from taskexp_lib.shapes import eval_tasks
 from taskexp_lib.shards import SHARDS, read_only_map
+from taskexp_lib.stats import order_stats, task_stats
 
 
 @contextmanager
@@ -443,7 +443,7 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
         f"{info['joined']} joined, {info['relabelled']} relabelled, {unusable} unusable "
         f"({info['picks_reached']:.0%} of the picks reached); "
         f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
-    if stats["higher_first"] is not None:          # the order the actor's data teach (report.py)
+    if stats["higher_first"] is not None:          # the order the actor's data teach (stats.py)
         log(f"  {info['other_orders']} also in another order; {stats['higher_first']:.0%} of the "
             f"{stats['multi_layer_steps']} steps with goals on several layers move a higher one")
     record["expansion"] = info

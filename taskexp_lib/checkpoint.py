@@ -3,9 +3,9 @@ checkpoints (round{k}.npz), the resume state (state.npz) and results.json.
 
 Plain .npz files, never pickle. Every write is atomic (a temporary file, then a rename), so a run
 killed mid-write leaves the previous file intact, and byte-identical for identical arrays, so two
-runs can be compared file by file (bench/compare_runs.py). A checkpoint carries the configuration
-it needs to be loaded (sizes, dtype, network, features, the world's geometry), and loading checks
-each of them, naming the file and the mismatch.
+runs can be compared file by file (lab/bench/compare_runs.py). A checkpoint carries the
+configuration it needs to be loaded (sizes, dtype, network, features, the world's geometry), and
+loading checks each of them, naming the file and the mismatch.
 """
 import json
 import os

@@ -116,7 +116,7 @@ class Config:
     """label_tasks: label before every later task expansion too, on this many of the tasks it
     starts from (the last round's new ones); 0 = only after the base PPO. Off by default since
     2026-12-05: with free table spots, 2000 later labels took most of rounds 1-3's time and left
-    seed 0 lower after round 2 (39% zero-shot against 51% without; one seed, bench/discussion.md)"""
+    seed 0 lower after round 2 (39% zero-shot against 51% without; one seed, lab/discussion.md)"""
     label_later_epochs: int = 30
     """label_later_tasks: epochs of those later value regressions (split as label_epochs is).
     (30 was the default's until 2026-12-04, with 2000 later tasks)"""

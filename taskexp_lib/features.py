@@ -45,7 +45,7 @@ def featurize(obs, n_y, features):
     x: what it is and where it wants to be, on its own. Heights are numbers only. A one-hot code
     of the layer (as until 2026-12-04) gives every layer weights of its own, and a layer no
     demonstration has reached yet meets weights that never learnt: the policy then dropped the
-    top block of a tower of four a bin or two off its goal x (bench/build_order.py). A number
+    top block of a tower of four a bin or two off its goal x (lab/bench/build_order.py). A number
     carries what the lower layers taught up to the next one.
     Which block rests under which, or whose goal lies on whose, is a relation between two blocks:
     features="relations" adds hand-computed ones (RELATIONS); with "plain" the network must find

@@ -10,7 +10,7 @@ on the difference equation (1) ranks by (agent.pair_value_loss). No geometric ru
 look-ahead scores a candidate at selection time: the critic still has to learn it.
 Most of a labelling's cost is the value fit, and fewer epochs pick worse. Before the later
 expansions the critic only has to follow the new tasks, so they have their own budget
-(label_later_tasks, label_later_epochs; bench/label_budget.py measures one); a sixth of it
+(label_later_tasks, label_later_epochs; lab/bench/label_budget.py measures one); a sixth of it
 still picks nearly as well, but the rounds after it build fewer tall tasks (README).
 """
 import numpy as np

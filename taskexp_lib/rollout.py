@@ -7,22 +7,19 @@ Results do not depend on the number of workers: a step is a pure function of (st
 """
 import multiprocessing
 import signal
-from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
 
-from env2d import BlockWorld
-
 from .geometry import observation
 
-_WORLD = None                  # a worker's own BlockWorld, which simulates for the main process
+_WORLD = None                  # a worker's own world, which simulates for the main process
 
 
-def _start_worker(n_blocks, drop):
+def _start_worker(make_world):
     global _WORLD
     signal.signal(signal.SIGINT, signal.SIG_IGN)    # Ctrl-C is the main process's to handle
-    _WORLD = BlockWorld(n_blocks, drop=drop)
+    _WORLD = make_world()
 
 
 def _simulate(job):
@@ -30,16 +27,17 @@ def _simulate(job):
 
 
 class PhysicsPool:
-    """Worker processes that run BlockWorld.simulate for the worlds of the main process.
+    """Worker processes that run world.simulate for the worlds of the main process; each worker
+    makes its own world with make_world() (env2d.physics_pool: a BlockWorld).
 
     Started with "spawn", which works the same on Linux, macOS and Windows and from a notebook.
     A worker whose main process dies (even by SIGKILL) finds its pipe closed and exits.
     """
 
-    def __init__(self, workers, n_blocks, drop=False):
+    def __init__(self, workers, make_world):
         self.workers = workers
         context = multiprocessing.get_context("spawn")
-        self._pool = context.Pool(workers, initializer=_start_worker, initargs=(n_blocks, drop))
+        self._pool = context.Pool(workers, initializer=_start_worker, initargs=(make_world,))
 
     def simulate(self, states, actions):
         """[(state after, noop, stable, substeps)] for each (state, action), in order."""
@@ -58,26 +56,13 @@ class PhysicsPool:
         self.close()
 
 
-def physics_pool(workers, n_blocks, drop=False):
-    """A PhysicsPool for workers > 1; with one, the main process steps the worlds itself."""
-    return PhysicsPool(workers, n_blocks, drop) if workers > 1 else nullcontext()
-
-
 class Worlds(list):
-    """BlockWorlds that run_episodes steps together: a list, and the PhysicsPool (or None) that
-    runs their physics."""
+    """Worlds that run_episodes steps together: a list, and the PhysicsPool (or None) that runs
+    their physics (env2d.run_worlds makes a run's)."""
 
-    def __init__(self, n, n_blocks, max_steps, pool=None, drop=False):
-        super().__init__(BlockWorld(n_blocks, max_steps=max_steps, drop=drop) for _ in range(n))
+    def __init__(self, worlds, pool=None):
+        super().__init__(worlds)
         self.pool = pool
-
-
-def run_worlds(cfg, pool=None):
-    """The worlds of a run with settings cfg -> (envs, short_envs): cfg.n_envs each, episodes of
-    cfg.max_steps actions, and of cfg.short_steps for verification, labels and stretch tasks."""
-    drop = cfg.action == "drop"
-    return (Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool, drop),
-            Worlds(cfg.n_envs, cfg.n_blocks, cfg.short_steps, pool, drop))
 
 
 @dataclass

@@ -1,6 +1,6 @@
 """taskexp_lib/stress.py -- stress actions for the world's physics: shared by the property test
-(tests/test_env2d.py, drawing through hypothesis) and bench/bench_settle.py (drawing from a numpy
-Generator), so both drive the same distribution."""
+(tests/test_env2d.py, drawing through hypothesis) and lab/bench/bench_settle.py (drawing from a
+numpy Generator), so both drive the same distribution."""
 import numpy as np
 
 from .geometry import BLOCK_H, N_X, nearest_x_bin

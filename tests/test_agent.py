@@ -14,7 +14,7 @@ from agent import (
     ppo_loss,
     value_loss,
 )
-from taskexp_lib.exercises.grader import numerical_grad  # central differences, step 1e-6
+from course.grader import numerical_grad  # central differences, step 1e-6
 from taskexp_lib.features import RELATIONS, feature_columns, featurize, relations
 from taskexp_lib.geometry import GEOMETRY
 from taskexp_lib.nets import SetNet

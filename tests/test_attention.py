@@ -4,8 +4,8 @@ equivariance, attention rows summing to 1, float32, and use as a drop-in for net
 import numpy as np
 import pytest
 
+from course.grader import numerical_grad  # central differences, step 1e-6
 from taskexp_lib import nn
-from taskexp_lib.exercises.grader import numerical_grad  # central differences, step 1e-6
 from taskexp_lib.nets import AttentionNet
 from taskexp_lib.nn import LayerNorm, SelfAttention, softmax
 

@@ -1,9 +1,9 @@
-"""The reproduction report end to end at a tiny budget: bench/reproduce.py runs its variants,
+"""The reproduction report end to end at a tiny budget: lab/bench/reproduce.py runs its variants,
 writes RESULTS.md with every table and the targets, and the figures it links to; the README's
-headline is what the runs kept in results/runs/ say (bench/headline.py); bench/label_budget.py
-measures a labelling budget from one of its runs; bench/bench_speed.py times every phase of a
-run and counts the operations of its matrix products; bench/value_fit.py replays a run's value
-fits."""
+headline is what the runs kept in lab/results/runs/ say (lab/bench/headline.py);
+lab/bench/label_budget.py measures a labelling budget from one of its runs;
+lab/bench/bench_speed.py times every phase of a run and counts the operations of its matrix
+products; lab/bench/value_fit.py replays a run's value fits."""
 import os
 import re
 import subprocess
@@ -12,20 +12,22 @@ import sys
 import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-sys.path.insert(0, os.path.join(ROOT, "bench"))
+BENCH = os.path.join(ROOT, "lab", "bench")
+sys.path.insert(0, BENCH)
 import bench_speed  # noqa: E402
 import headline  # noqa: E402
 import value_fit  # noqa: E402
 from run_seeds import FLAGS  # noqa: E402
 
 import taskexp  # noqa: E402
-from taskexp_lib import cli, one_blas_thread  # noqa: E402
+import taskexp_cli as cli  # noqa: E402
+from taskexp_lib import one_blas_thread  # noqa: E402
 from taskexp_lib.config import Config, saved_config  # noqa: E402
 
 
 def test_reproduce_writes_the_report(tmp_path):
     out, figs = tmp_path / "R.md", tmp_path / "figs"
-    subprocess.run([sys.executable, os.path.join(ROOT, "bench", "reproduce.py"), "--seeds", "0",
+    subprocess.run([sys.executable, os.path.join(BENCH, "reproduce.py"), "--seeds", "0",
                     "1", "--features", "plain", "--variants", "ours", "direct-ppo", "no-restrict",
                     "--rounds", "2", "--direct-rounds", "1", "--scale", "0.02", "--root",
                     str(tmp_path / "runs"), "--out", str(out), "--figures", str(figs)],
@@ -70,7 +72,7 @@ def test_reproduce_writes_the_report(tmp_path):
     assert headline.readme_block(readme) == lines
     assert readme.read_text().startswith("intro\n") and readme.read_text().endswith("rest\n")
     # the report written again from the kept copies: the same tables; a run not kept is named
-    report = [sys.executable, os.path.join(ROOT, "bench", "reproduce.py"), "--seeds", "0", "1",
+    report = [sys.executable, os.path.join(BENCH, "reproduce.py"), "--seeds", "0", "1",
               "--features", "plain", "--rounds", "2", "--kept", str(kept), "--out",
               str(tmp_path / "K.md"), "--figures", str(figs), "--variants", "ours", "no-restrict"]
     subprocess.run(report, check=True, cwd=tmp_path, capture_output=True)
@@ -84,7 +86,7 @@ def test_reproduce_writes_the_report(tmp_path):
     assert missing.returncode != 0 and "keeps no plain direct-ppo run of seed 0" in missing.stderr
     # a later round's labelling budget measured from a run's resume state, and none
     for tasks in ("20", "0"):
-        printed = subprocess.run([sys.executable, os.path.join(ROOT, "bench", "label_budget.py"),
+        printed = subprocess.run([sys.executable, os.path.join(BENCH, "label_budget.py"),
                                   str(tmp_path / "runs" / "ours-seed0"), "--tasks", tasks,
                                   "--epochs", "2", "--attempts", "20"], check=True,
                                  capture_output=True, text=True).stdout
@@ -92,7 +94,8 @@ def test_reproduce_writes_the_report(tmp_path):
 
 
 def test_the_readme_headline_is_what_the_kept_runs_say():
-    """Every figure of the README's headline comes from results/runs/: edit one, and this fails."""
+    """Every figure of the README's headline comes from lab/results/runs/: edit one, and this
+    fails."""
     by_variant = headline.load_all()
     assert [r["config"]["seed"] for r in by_variant["ours"]] == [0, 1, 2]
     # read as --resume reads a run's settings: a field added since a run was made has its default
@@ -113,24 +116,23 @@ def test_the_readme_headline_is_what_the_kept_runs_say():
 
 
 def test_results_md_is_what_the_kept_runs_say(tmp_path):
-    """RESULTS.md is written from results/runs/ (reproduce.py --kept): written again, its tables
+    """RESULTS.md is written from lab/results/runs/ (reproduce.py --kept): written again, its tables
     and its discussion are the same; edit a figure of either, and this fails."""
     out = tmp_path / "R.md"
-    subprocess.run([sys.executable, os.path.join(ROOT, "bench", "reproduce.py"), "--kept",
-                    "--out", str(out), "--figures", str(tmp_path)],
+    subprocess.run([sys.executable, os.path.join(BENCH, "reproduce.py"), "--kept",
+                    "--out", str(out), "--figures", str(tmp_path / "results")],
                    check=True, cwd=ROOT, capture_output=True)
-    with open(os.path.join(ROOT, "RESULTS.md")) as f:
+    with open(os.path.join(ROOT, "lab", "RESULTS.md")) as f:
         committed = f.read().split("\n")
     again = out.read_text().split("\n")
-    assert committed[0] == again[0] and committed[3:] == [
-        line.replace(str(tmp_path), "results") for line in again[3:]]
+    assert committed[0] == again[0] and committed[3:] == again[3:]
 
 
 def test_what_the_readme_quotes_from_results_md_is_in_it():
     """The README's paragraph on the full report quotes RESULTS.md: each figure must be there."""
     with open(os.path.join(ROOT, "README.md")) as f:
         readme = f.read()
-    with open(os.path.join(ROOT, "RESULTS.md")) as f:
+    with open(os.path.join(ROOT, "lab", "RESULTS.md")) as f:
         results = f.read()
     paragraph = readme.split("**The full report**", 1)[1].split("\n\n", 1)[0]
     quoted = re.findall(r"\d+ \+- \d+%", paragraph)
@@ -138,8 +140,8 @@ def test_what_the_readme_quotes_from_results_md_is_in_it():
 
 
 def test_bench_speed_accounts_for_every_phase(tmp_path):
-    """bench/bench_speed.py's time by phase: every phase of a tiny run is timed, none twice (what
-    is left of the wall time for the rest is positive), and the run's code is restored after.
+    """lab/bench/bench_speed.py's time by phase: every phase of a tiny run is timed, none twice
+    (what is left of the wall time for the rest is positive), and the run's code is restored after.
     At scale 0.02 the base policy solves a few tasks, so that there are outcomes to label."""
     cfg = cli.parse_args(["--rounds", "1", "--scale", "0.02", "--out", "unused"]).cfg
     before = taskexp.labelled
@@ -176,8 +178,8 @@ def test_bench_speed_counts_the_networks_operations():
 
 
 def test_value_fit_replays_the_runs_fits():
-    """bench/value_fit.py: with nothing held out and the run's own settings, a replayed value fit
-    ends at the run's critic to the byte, so the held-out curves it prints are of the run's own
+    """lab/bench/value_fit.py: with nothing held out and the run's own settings, a replayed value
+    fit ends at the run's critic to the byte, so the held-out curves it prints are of the run's own
     fits; held out, only rows new to the fit leave its training set."""
     cfg = cli.parse_args(["--rounds", "1", "--scale", "0.03", "--out", "unused"]).cfg
     with one_blas_thread():

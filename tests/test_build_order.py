@@ -1,7 +1,7 @@
 """The order in which blocks are moved: the moves sorted by report.move_kind, the share of
 demonstrated steps that move a higher goal first (report.order_stats), plans replayed in the world
 (rollout.replay), the other order of a joined demonstration (orders.other_orders), and the
-leading indicator bench/build_order.py."""
+leading indicator lab/bench/build_order.py."""
 import os
 import sys
 
@@ -13,11 +13,11 @@ from agent import Agent
 from env2d import BlockWorld
 from taskexp_lib import orders
 from taskexp_lib.geometry import BLOCK_W, nearest_x_bin
-from taskexp_lib.report import MOVE_KINDS, move_kind, order_stats
 from taskexp_lib.rollout import Trajectory, replay
+from taskexp_lib.stats import MOVE_KINDS, move_kind, order_stats
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                "bench"))
+                                "lab", "bench"))
 import build_order  # noqa: E402
 
 X = 0.2                                     # the tower's x, on the grid

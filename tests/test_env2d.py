@@ -33,7 +33,7 @@ SPREAD = [-0.4, -0.25, -0.1, 0.05, 0.2, 0.35]
 def test_check_env_passes_with_warnings_as_errors():
     with warnings.catch_warnings():
         warnings.simplefilter("error")                # a warning (e.g. unbounded spaces) fails
-        for kwargs in ({}, dict(n_blocks=3, render_mode="rgb_array"),
+        for kwargs in ({}, dict(drop=False), dict(n_blocks=3, render_mode="rgb_array"),
                        dict(n_blocks=8, max_steps=4)):
             check_env(gymnasium.make("taskexp/BlockWorld-v0", **kwargs).unwrapped)
 
@@ -41,6 +41,9 @@ def test_check_env_passes_with_warnings_as_errors():
 def test_registered_with_gymnasium_and_keywords_pass_through():
     env = gymnasium.make("taskexp/BlockWorld-v0", n_blocks=7, max_steps=4)
     assert (env.unwrapped.n_blocks, env.unwrapped.max_steps) == (7, 4)
+    # the world the method runs in drops a block at an x; drop=False gives the one that places
+    assert env.unwrapped.drop and env.action_space.nvec.tolist() == [7, 37, 1]
+    assert not gymnasium.make("taskexp/BlockWorld-v0", drop=False).unwrapped.drop
     obs, _ = env.reset(seed=0)
     assert obs.shape == (7, 6) and env.observation_space.contains(obs)
 

@@ -1,4 +1,4 @@
-"""Tests of the problem set (taskexp_lib.exercises, notebooks/exercises/): the checks must be able
+"""Tests of the problem set (course, course/notebooks/): the checks must be able
 to fail.
 
 Every reference solution passes its check (the library's and the instructor notebooks'); every
@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 
 import agent
+import course as exercises
 import taskexp
-import taskexp_lib.exercises as exercises
 from taskexp_lib import nn
 from taskexp_lib.geometry import is_success
 
@@ -425,7 +425,7 @@ def test_blank_keeps_the_indentation():
 
 def cli(*args, cwd=ROOT):
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return subprocess.run([sys.executable, "-m", "taskexp_lib.exercises", *args], cwd=cwd, env=env,
+    return subprocess.run([sys.executable, "-m", "course", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=300)
 
 

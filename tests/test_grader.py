@@ -1,5 +1,5 @@
 """The real grader: nbgrader (a dev dependency: if it is missing these tests fail, they do not
-skip), run as an instructor would, on the course that `python -m taskexp_lib.exercises course`
+skip), run as an instructor would, on the course that `python -m course course`
 writes.
 
     nbgrader generate_assignment taskexp     on the instructor notebooks (source/taskexp/)
@@ -23,8 +23,8 @@ import nbgrader  # noqa: F401  (the dev dependency: an ImportError here fails, i
 import pytest
 from nbgrader.api import Gradebook
 
-import taskexp_lib.exercises as exercises
-import taskexp_lib.exercises.kit as kit
+import course as exercises
+import course.kit as kit
 
 POINTS = exercises.POINTS
 WRONG = ("return int(np.argmax(v_T - v_0))", "return int(np.argmax(v_T))")      # in ex6
@@ -98,7 +98,7 @@ def test_graded_cells_write_nothing_to_stderr_and_fail_with_a_message(course):
 
 
 def test_nbgrader_release_is_the_student_kit(course, tmp_path):
-    """generate_assignment writes the same files as `python -m taskexp_lib.exercises release`,
+    """generate_assignment writes the same files as `python -m course release`,
     with the same code in every notebook, and no answer."""
     root, mine = course[0] / "release" / "taskexp", kit.release(str(tmp_path / "kit"))
     files = lambda top: sorted(os.path.relpath(os.path.join(d, f), top)
@@ -109,7 +109,7 @@ def test_nbgrader_release_is_the_student_kit(course, tmp_path):
             code = lambda top: [c["source"] for c in json.load(open(os.path.join(top, name)))
                                 ["cells"]]
             assert ["".join(s) for s in code(root)] == ["".join(s) for s in code(mine)], name
-        elif name != os.path.join("taskexp_lib", "exercises", "vectors.json"):
+        elif name != os.path.join("course", "vectors.json"):
             assert open(os.path.join(root, name)).read() == \
                 open(os.path.join(mine, name)).read(), name
     assert kit.answers_in(root) == []

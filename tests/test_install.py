@@ -53,12 +53,15 @@ def test_installed_world_registers_with_gymnasium_and_passes_check_env(fresh, tm
         assert not env2d.__file__.startswith(%r), env2d.__file__       # the installed copy
         env = gymnasium.make("taskexp/BlockWorld-v0", n_blocks=7)
         assert env.unwrapped.n_blocks == 7
+        assert env.unwrapped.drop, "the world the method uses drops its blocks"
+        assert not gymnasium.make("taskexp/BlockWorld-v0", drop=False).unwrapped.drop
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            check_env(gymnasium.make("taskexp/BlockWorld-v0").unwrapped)
-        import importlib, pkgutil, taskexp, agent, taskexp_lib            # every module imports
-        for m in pkgutil.walk_packages(taskexp_lib.__path__, "taskexp_lib."):
-            if m.name != "taskexp_lib.exercises.__main__":              # that one runs the CLI
+            for drop in (True, False):
+                check_env(gymnasium.make("taskexp/BlockWorld-v0", drop=drop).unwrapped)
+        import importlib, pkgutil, taskexp, agent, taskexp_lib, taskexp_cli  # every module imports
+        for package in (taskexp_lib, taskexp_cli):
+            for m in pkgutil.walk_packages(package.__path__, package.__name__ + "."):
                 importlib.import_module(m.name)
         print("ok")
     """ % ROOT)
@@ -74,8 +77,9 @@ def test_installed_console_script_prints_its_help(fresh, tmp_path):
     assert "--rounds" in res.stdout and "--ppo-steps" in res.stdout
 
 
-def test_the_wheel_installs_only_the_three_modules_and_the_project_package(tmp_path):
-    """No generic top-level name (config, cli, exercises ...) that another package could shadow."""
+def test_the_wheel_installs_only_the_three_modules_and_the_project_packages(tmp_path):
+    """The three floors (not the course, not the lab), and no generic top-level name (config,
+    cli, exercises ...) that another package could shadow."""
     # from a copy: a build/ folder left in the checkout by an earlier build could add stale files
     src = tmp_path / "src"
     shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(
@@ -87,4 +91,4 @@ def test_the_wheel_installs_only_the_three_modules_and_the_project_package(tmp_p
     with zipfile.ZipFile(wheel) as z:
         top = {name.split("/")[0].removesuffix(".py") for name in z.namelist()
                if ".dist-info/" not in name}
-    assert top == {"taskexp", "env2d", "agent", "taskexp_lib"}
+    assert top == {"taskexp", "env2d", "agent", "taskexp_lib", "taskexp_cli"}

@@ -1,4 +1,4 @@
-"""The student kit (`python -m taskexp_lib.exercises release OUT`): self-contained, and without
+"""The student kit (`python -m course release OUT`): self-contained, and without
 answers.
 
 Its library is the repository's with each exercised function's body replaced by a raise, and
@@ -20,9 +20,9 @@ import sys
 import numpy as np
 import pytest
 
-import taskexp_lib.exercises as exercises
-import taskexp_lib.exercises.kit as kit
-from taskexp_lib.exercises import vectors
+import course as exercises
+import course.kit as kit
+from course import vectors
 
 ROOT = kit.REPOSITORY
 
@@ -34,7 +34,7 @@ def kit_dir(tmp_path_factory):
 
 def cli(*args, cwd=ROOT, python=sys.executable):
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
-    return subprocess.run([python, "-m", "taskexp_lib.exercises", *args], cwd=cwd, env=env,
+    return subprocess.run([python, "-m", "course", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=600)
 
 
@@ -46,7 +46,7 @@ def test_cli_release_writes_the_kit_and_never_over_the_repository(tmp_path):
     assert sorted(os.listdir(out)) == sorted(
         [*exercises.NOTEBOOKS.values(), *top_level, "taskexp_lib", "requirements.txt",
          "README.md"])
-    assert "vectors.json" in os.listdir(out / "taskexp_lib" / "exercises")
+    assert "vectors.json" in os.listdir(out / "course")
     assert cli("release", str(out)).returncode == 0                   # an earlier kit: updated
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("mine")
@@ -120,13 +120,13 @@ def test_the_answer_search_finds_an_answer(kit_dir, tmp_path):
     with open(os.path.join(ROOT, "agent.py")) as f:
         gae = f.read()
     first, last = kit.body_lines(gae, "gae")
-    with open(tmp_path / "leaky" / "taskexp_lib" / "exercises" / "helpers.py", "w") as f:
+    with open(tmp_path / "leaky" / "course" / "helpers.py", "w") as f:
         f.write("\n".join(gae.splitlines()[first - 1:last]))
     assert [where for _, where, _ in kit.answers_in(tmp_path / "leaky")] == ["agent.gae"]
 
 
 def test_recorded_cases_are_the_live_ones(kit_dir):
-    with open(os.path.join(kit_dir, "taskexp_lib", "exercises", "vectors.json")) as f:
+    with open(os.path.join(kit_dir, "course", "vectors.json")) as f:
         recorded = json.load(f)["cases"]
     live = json.loads(json.dumps(kit.record_vectors()))
     assert recorded == live and len(live) == 5 + 6 + 12 + 6 + 7 + 13 + 5
@@ -166,7 +166,7 @@ def bare_python(tmp_path_factory):
 def test_kit_runs_from_a_folder_outside_the_checkout(kit_dir, bare_python, tmp_path):
     kit_copy = shutil.copytree(kit_dir, tmp_path / "anywhere")
     # no module from the checkout (its virtual environment's packages may live inside it)
-    where = ("import sys, taskexp_lib.exercises, agent, taskexp, env2d; "
+    where = ("import sys, course, agent, taskexp, env2d; "
              "print(sorted({m.__file__ for m in list(sys.modules.values()) "
              "if getattr(m, '__file__', None) and m.__file__.startswith(%r) "
              "and 'site-packages' not in m.__file__}))" % ROOT)

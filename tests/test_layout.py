@@ -1,9 +1,18 @@
-"""The code's layout: one job per file, no import cycle, no module loaded twice.
+"""The code's layout: three floors, one job per file, no import cycle, no module loaded twice.
 
-The library is the three modules of the design (taskexp.py, env2d.py, agent.py) and the package
-taskexp_lib/; the import graph is read from the syntax trees, so the test needs nothing run.
+    ground floor   taskexp_lib/   layers, networks, features, geometry, config, checkpoints,
+                                  episodes, drawing: imports none of the floors above
+    the method     taskexp.py, env2d.py, agent.py
+    above it       taskexp_cli/   the command line and the reports
+
+The wheel installs these three floors; the course (course/) and the lab (lab/bench/) use them,
+and they use neither. The import graph is read from the syntax trees, so the test needs nothing
+run. A file run as a program (`python taskexp.py`, `python -m course`) is a module of its own,
+`__main__`: its `if __name__ == "__main__"` block is part of that module, not of the one that
+other files import.
 """
 import ast
+import glob
 import os
 import subprocess
 import sys
@@ -11,32 +20,35 @@ import textwrap
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MAX_LINES = 500
+METHOD = ("taskexp", "env2d", "agent")
+FLOORS = {"taskexp_lib": 0, **{m: 1 for m in METHOD}, "taskexp_cli": 2}
 
 
-def library_files():
-    """{module name: path} of every library module."""
-    files = {m: os.path.join(ROOT, f"{m}.py") for m in ("taskexp", "env2d", "agent")}
-    for folder, _, names in os.walk(os.path.join(ROOT, "taskexp_lib")):
-        for name in names:
-            if name.endswith(".py"):
-                path = os.path.join(folder, name)
-                parts = os.path.relpath(path, ROOT)[:-3].split(os.sep)
-                files[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+def module_files(folders=("taskexp_lib", "taskexp_cli", "course")):
+    """{module name: path} of the three modules and every module of the packages `folders`."""
+    files = {m: os.path.join(ROOT, f"{m}.py") for m in METHOD}
+    for folder in folders:
+        for path in glob.glob(os.path.join(ROOT, folder, "*.py")):
+            parts = os.path.relpath(path, ROOT)[:-3].split(os.sep)
+            files[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
     return files
 
 
+def lab_scripts():
+    """{"lab:name": path} of the lab's scripts, run as programs from lab/bench/."""
+    return {f"lab:{os.path.basename(p)[:-3]}": p
+            for p in glob.glob(os.path.join(ROOT, "lab", "bench", "*.py"))}
+
+
 def imports(module, path, known):
-    """The library modules that `module` imports, anywhere but under `if __name__ == "__main__"`
-    (which runs only when the file is the program)."""
+    """(the known modules `module` imports when imported, and those its `if __name__ ==
+    "__main__"` block imports when the file runs as the program)."""
     tree = ast.parse(open(path).read())
     package = module if path.endswith("__init__.py") else module.rpartition(".")[0]
-    main_guards = [n for n in tree.body
-                   if isinstance(n, ast.If) and "__main__" in ast.unparse(n.test)]
-    skip = {id(n) for guard in main_guards for n in ast.walk(guard)}
-    found = set()
+    guards = [n for n in tree.body if isinstance(n, ast.If) and "__main__" in ast.unparse(n.test)]
+    in_guard = {id(n) for guard in guards for n in ast.walk(guard)}
+    found, found_main = set(), set()
     for node in ast.walk(tree):
-        if id(node) in skip:
-            continue
         if isinstance(node, ast.Import):
             names = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -47,34 +59,96 @@ def imports(module, path, known):
             names = [base] + [f"{base}.{a.name}" for a in node.names]
         else:
             continue
-        found |= {n for n in names if n in known and n != module}
+        (found_main if id(node) in in_guard else found).update(n for n in names if n in known)
     # a package is loaded before its modules anyway: a module naming its own package (from .
     # import x) is no cycle
-    return {n for n in found if not module.startswith(n + ".")}
+    own = lambda names: {n for n in names if n != module and not module.startswith(n + ".")}
+    return own(found), own(found_main)
 
 
-def test_no_library_file_is_longer_than_500_lines():
-    long = {m: n for m, p in library_files().items() if (n := len(open(p).readlines())) > MAX_LINES}
+def import_graph():
+    """{module: modules it imports}, with a node "__main__:m" for each file m that runs as a
+    program: what running it imports (its module's imports and its main block's)."""
+    files = {**module_files(), **lab_scripts()}
+    known = set(files) | {m.split(":")[1] for m in files if m.startswith("lab:")}
+    graph = {}
+    for m, p in files.items():
+        plain, main = imports(m, p, known)
+        graph[m] = plain
+        if main or m.startswith("lab:") or m.endswith("__main__"):
+            graph[f"__main__:{m}"] = plain | main
+    for m in graph:                        # a lab script imports its neighbours by bare name
+        graph[m] = {f"lab:{n}" if f"lab:{n}" in files else n for n in graph[m]}
+    return graph
+
+
+def floor(module):
+    """0, 1 or 2 for the product's modules, None for the course and the lab."""
+    return FLOORS.get(module.split(".")[0])
+
+
+def test_no_file_is_longer_than_500_lines():
+    files = {**module_files(), **lab_scripts()}
+    long = {m: n for m, p in files.items() if (n := len(open(p).readlines())) > MAX_LINES}
     assert not long, f"over {MAX_LINES} lines: {long}"
 
 
-def test_the_library_has_no_import_cycle():
-    files = library_files()
-    graph = {m: imports(m, p, files) for m, p in files.items()}
-    assert graph["taskexp_lib.nn"] == set(), "the layers import numpy only"
+def cycle(graph):
+    """An import cycle of `graph` as a list of modules, or None."""
     done, path = set(), []
 
     def visit(m):                                  # depth first; a module met on its own path
         if m in path:                              # closes a cycle
-            raise AssertionError("import cycle: " + " -> ".join(path[path.index(m):] + [m]))
+            return path[path.index(m):] + [m]
         if m not in done:
             path.append(m)
-            for n in sorted(graph[m]):
-                visit(n)
+            for n in sorted(graph.get(m, ())):
+                if found := visit(n):
+                    return found
             path.pop()
             done.add(m)
-    for m in sorted(graph):
-        visit(m)
+    return next((c for m in sorted(graph) if (c := visit(m))), None)
+
+
+def upward(graph):
+    """The imports of `graph` that go up a floor or out of the product. A main block of the
+    method may hand over to the command line: that is taskexp.py's program, not its module."""
+    wrong = []
+    for m, deps in graph.items():
+        name = m.split(":")[-1]
+        program_of_the_method = m.startswith("__main__:") and name in METHOD
+        if floor(name) is None:
+            continue
+        wrong += [f"{m} imports {d}" for d in sorted(deps) if floor(d) is None
+                  or (floor(d) > floor(name) and not program_of_the_method)]
+    return wrong
+
+
+def test_no_import_cycle_main_blocks_included():
+    graph = import_graph()
+    assert graph["taskexp_lib.nn"] == set(), "the layers import numpy only"
+    assert cycle(graph) is None, "import cycle: " + " -> ".join(cycle(graph))
+
+
+def test_each_floor_imports_only_the_floors_under_it():
+    """The product never imports the course or the lab, and no floor imports one above it."""
+    assert upward(import_graph()) == []
+
+
+def test_the_layout_tests_see_a_cycle_in_a_main_block_and_an_upward_import(tmp_path):
+    """The two tests above can fail: a cycle closed only by a main block, and a ground-floor
+    module importing the method, are both found."""
+    cli = tmp_path / "cli.py"
+    cli.write_text("import taskexp\nif __name__ == '__main__':\n    import course\n")
+    assert imports("taskexp_cli.x", str(cli), {"taskexp", "course"}) == ({"taskexp"}, {"course"})
+    graph = {"a": {"b"}, "b": set(), "__main__:b": {"a"}}
+    assert cycle(graph) is None
+    assert cycle({**graph, "b": {"a"}}) == ["a", "b", "a"]
+    graph = {**import_graph(), "taskexp_lib.nn": {"agent"}, "__main__:taskexp_lib.nn": {"course"}}
+    assert upward(graph) == ["taskexp_lib.nn imports agent",
+                             "__main__:taskexp_lib.nn imports course"]
+    assert upward({"__main__:taskexp": {"taskexp_cli"}, "taskexp": {"taskexp_cli"}}) == [
+        "taskexp imports taskexp_cli"]
 
 
 def test_python_taskexp_py_defines_the_method_once():

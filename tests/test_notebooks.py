@@ -113,8 +113,8 @@ def test_notebook_writes_nothing_into_the_repository_docs(path):
 def test_the_reader_sees_no_issue_numbers():
     """What a reader sees says what was measured, not which work item asked for it."""
     texts = {p: open(p, encoding="utf-8").read()
-             for p in [os.path.join(ROOT, "README.md"), os.path.join(ROOT, "RESULTS.md"),
-                       os.path.join(ROOT, "bench", "discussion.md"), *NOTEBOOKS]}
+             for p in [os.path.join(ROOT, "README.md"), os.path.join(ROOT, "lab", "RESULTS.md"),
+                       os.path.join(ROOT, "lab", "discussion.md"), *NOTEBOOKS]}
     found = {os.path.basename(p): re.findall(r"issue [0-9]+", t, re.IGNORECASE)
              for p, t in texts.items()}
     assert not any(found.values()), found

@@ -6,8 +6,8 @@ from test_agent import random_obs
 
 import taskexp
 from agent import Agent, bc_loss, ppo_loss
-from env2d import BlockWorld
-from taskexp_lib.rollout import Worlds, physics_pool, run_episodes
+from env2d import BlockWorld, physics_pool, run_worlds
+from taskexp_lib.rollout import run_episodes
 from taskexp_lib.shards import SHARDS, Shards, read_only_map, replica, split, weighted_sum
 
 
@@ -89,7 +89,7 @@ def test_base_demos_are_the_same_with_the_physics_in_workers():
     results = []
     for workers in (1, 2):
         with physics_pool(workers, cfg.n_blocks, drop=True) as pool:
-            envs = Worlds(cfg.n_envs, cfg.n_blocks, cfg.max_steps, pool, drop=True)
+            envs, _ = run_worlds(cfg, pool)
             results.append(taskexp.base_demos(cfg, envs, np.random.default_rng(0), 50))
     (tasks1, obs1, act1), (tasks2, obs2, act2) = results
     assert obs1.tobytes() == obs2.tobytes() and act1.tobytes() == act2.tobytes()

@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 
 import taskexp
+import taskexp_cli as cli
 from agent import Agent
 from env2d import BlockWorld
-from taskexp_lib import cli, labels, shapes
+from taskexp_lib import labels, shapes
 from taskexp_lib.geometry import BLOCK_H, is_success, layer, same_spot
 from taskexp_lib.rollout import Trajectory
 
@@ -246,7 +247,7 @@ def test_histogram_figure_shows_each_round_share_spread_and_title():
     seeds, std as error bars), on a log axis, titled, the legend beside the axes."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-    from taskexp_lib.report import histogram_figure
+    from taskexp_cli.report import histogram_figure
     per_round = [(0, [[8, 2, 0], [6, 4, 0]]), (1, [[5, 4, 1], [5, 4, 1]])]
     fig = histogram_figure(per_round, "Figure 1: test", "layer", 0, log=True)
     ax = fig.axes[0]
