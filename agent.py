@@ -28,7 +28,7 @@ from taskexp_lib.features import featurize
 from taskexp_lib.geometry import N_X
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.nn import Adam, check_finite, clip_grad_norm, mlp_backward
-from taskexp_lib.shards import SHARDS, Shards, replica
+from taskexp_lib.shards import DataParallel
 
 # ---- The factorised action distribution (sec 3):  pi(b, x, y) = pi(b) pi(x | b) pi(y | b) ----
 
@@ -306,27 +306,34 @@ class Agent:
     def _fit(self, phase, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng,
              max_grad_norm, inputs=lambda o: o, bar=None):
         """Minibatch Adam on loss_fn(out, targets) -> (L, dL/dout, ...), a mean over the samples.
-        Each minibatch runs as SHARDS parts on both cores (shards.py). Features are computed per
-        part, as (N, n, F) float64 for N = 100k would need ~300 MB. inputs(obs[idx]) gives the
-        network's observations of a part; bar(total, desc) a progress bar, one tick a minibatch."""
+        inputs(obs[idx]) gives the network's observations of a minibatch; bar(total, desc) a
+        progress bar, one tick a minibatch. -> the mean minibatch loss of each epoch."""
         obs, opt.lr, losses = np.asarray(obs, dtype=np.float64), lr, []
-        replicas = [replica(net) for _ in range(SHARDS)]
 
-        def part(k, idx):                            # part k of a minibatch: loss and gradients
-            out = replicas[k].forward(self.features(inputs(obs[idx])))
-            loss, dout = loss_fn(out, targets[idx])[:2]
-            return loss, replicas[k].backward(dout)
+        def loss_and_grads(net, idx):
+            """One minibatch idx -> (L, dL/dtheta). net: the network to run (a copy of it that
+            shares its parameters, when the minibatch is split over the cores)."""
+            # features per minibatch: for all N at once, (N, n, F) float64 would need ~300 MB
+            # for N = 100k
+            f = self.features(inputs(obs[idx]))
+            out = net.forward(f)
+            loss, dout = loss_fn(out, targets[idx])[:2]             # L and dL/dout
+            return loss, net.backward(dout)                         # dL/dtheta, by backprop
 
         steps = epochs * -(-len(obs) // batch_size)
-        with Shards(self.threads) as shards, (bar or _no_bar)(total=steps, desc=phase) as progress:
+        progress = (bar or _no_bar)(total=steps, desc=phase)
+        with self.data_parallel(net) as both_cores, progress:
             for e in range(epochs):
                 epoch = []
                 for i, idx in enumerate(_minibatches(len(obs), batch_size, rng)):
-                    loss, grads = shards.mean(part, idx)
+                    # = loss_and_grads(net, idx) up to rounding: the means over its two halves,
+                    # one on each core, weighted by their sizes (the same bytes on one core)
+                    loss, grads = both_cores(loss_and_grads, idx)
+                    # g <- g min(1, max_norm / |g|): one global L2 norm over all parameters
                     grads, norm = clip_grad_norm(grads, max_grad_norm)
                     check_finite(f"{phase} epoch {e + 1} minibatch {i + 1}", loss=loss,
                                  gradient_norm=norm)
-                    opt.step(grads)
+                    opt.step(grads)              # Adam: theta -= lr mhat / (sqrt(vhat) + eps)
                     epoch.append(loss)
                     progress.update(1)
                 check_finite(f"{phase} epoch {e + 1}", parameters=net.params)
@@ -362,39 +369,53 @@ class Agent:
         # GAE's returns are R = A + V, so R - V = A
         var_r = np.var(returns)
         ev = float(1.0 - np.var(adv) / var_r) if var_r > 0 else float("nan")
-        adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+        adv = (adv - adv.mean()) / (adv.std() + 1e-8)               # A <- (A - mean) / std
         self.actor_opt.lr = self.critic_opt.lr = lr
-        actors, critics = ([replica(net) for _ in range(SHARDS)] for net in (self.actor,
-                                                                              self.critic))
 
-        def part(k, idx):         # part k of a minibatch: both networks' losses and gradients
+        def loss_and_grads(actor, critic, idx):
+            """One minibatch idx -> (L_clip - c_ent H, 0.5 (V - R)^2, the actor's and the critic's
+            gradients, the figures logged). actor, critic: the networks to run (copies of them
+            that share their parameters, when the minibatch is split over the cores)."""
             f, a, lp, A = features[idx], actions[idx], logp_old[idx], adv[idx]
-            out = actors[k].forward(f)
+            out = actor.forward(f)                                  # logits of pi(b, x, y)
+            # r = exp(log pi - log pi_old);  L = -mean min(r A, clip(r, 1-eps, 1+eps) A) - c_ent H
             pl, dout = ppo_loss(out, a, lp, A, self.n_x, clip, ent_coef)
-            vl, dv, _ = value_loss(critics[k].forward(f), returns[idx])
+            vl, dv, _ = value_loss(critic.forward(f), returns[idx])  # 0.5 mean (V - R)^2
             # the loss returns (L, dL/dout) only, as exercise 4 asks: the logged figures come
             # from the distribution again (a few element-wise operations)
             stats = (*ppo_stats(self.action_dist(out, self.n_x), a, lp, A, clip), vl)
-            return (pl, vl, actors[k].backward(dout), critics[k].backward(vf_coef * dv),
+            # backprop; the critic's loss is weighted by c_v:  d(c_v 0.5 (V - R)^2)/dout
+            return (pl, vl, actor.backward(dout), critic.backward(vf_coef * dv),
                     np.array(stats))
 
         stats = []
-        with Shards(self.threads) as shards:
+        with self.data_parallel(self.actor, self.critic) as both_cores:
             for e in range(epochs):
                 for i, idx in enumerate(_minibatches(len(obs), minibatch, rng)):
-                    pl, vl, g_actor, g_critic, s = shards.mean(part, idx)
+                    # = loss_and_grads(self.actor, self.critic, idx) up to rounding: its two
+                    # halves on both cores, weighted by their sizes (as in _fit)
+                    pl, vl, g_actor, g_critic, s = both_cores(loss_and_grads, idx)
+                    # each network its own clip, g <- g min(1, max_norm / |g|) (a global norm)
                     g_actor, norm_actor = clip_grad_norm(g_actor, max_grad_norm)
                     g_critic, norm_critic = clip_grad_norm(g_critic, max_grad_norm)
                     check_finite(f"PPO update epoch {e + 1} minibatch {i + 1}", policy_loss=pl,
                                  value_loss=vl, actor_gradient_norm=norm_actor,
                                  critic_gradient_norm=norm_critic)
-                    self.actor_opt.step(g_actor)
+                    self.actor_opt.step(g_actor)                    # Adam, each its own state
                     self.critic_opt.step(g_critic)
                     stats.append(s)
                 check_finite(f"PPO update epoch {e + 1}", actor_parameters=self.actor.params,
                              critic_parameters=self.critic.params)
         names = ("policy_loss", "entropy", "approx_kl", "clip_frac", "value_loss")
         return {**dict(zip(names, np.mean(stats, 0).tolist())), "explained_variance": ev}
+
+    def data_parallel(self, *nets):
+        """The updates' minibatch on both cores (taskexp_lib/shards.py): a context manager
+        `both_cores` with both_cores(loss_and_grads, idx) = loss_and_grads(*nets, idx) up to
+        rounding, the minibatch cut into SHARDS parts that run on replicas of the networks in
+        self.threads threads, their results weighted by their share of it. The same bytes for
+        any number of threads; the update methods stay one plain minibatch step."""
+        return DataParallel(nets, self.threads)
 
     def _check_actions(self, actions):
         hi = np.array([self.n_blocks, self.n_x, self.n_y])

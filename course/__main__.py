@@ -16,13 +16,21 @@ from .grader import passes
 from .kit import course, release
 from .notebooks import functions
 from .problems import NOTEBOOKS, POINTS
+from .vectors import in_kit
 
-USAGE = """usage: python -m course COMMAND
+STUDENT_USAGE = """usage: python -m course COMMAND
   ex1 .. ex6, ex8 NOTEBOOK   check one exercise in your notebook, e.g. ex3 ex3_gae.ipynb
   ex7 FOLDER            exercise 7: trains with the ex1-ex4 notebooks in FOLDER (e.g. .)
-  all FOLDER            check all eight notebooks in FOLDER, then the total
+  all FOLDER            check all eight notebooks in FOLDER, then the total"""
+INSTRUCTOR_USAGE = """
   release OUT           (instructors) write the student kit into OUT
   course DIR            (instructors) write an nbgrader course into DIR"""
+
+
+def usage():
+    """The commands one can run here: a student kit has no reference solutions to make a kit
+    from, so its students read only their own commands; the repository lists all."""
+    return STUDENT_USAGE + ("" if in_kit() else INSTRUCTOR_USAGE)
 
 
 def check(exercise, notebook):
@@ -68,7 +76,7 @@ def main(argv=None):
               "student kit's folder)", file=sys.stderr)
         return 2
     if cmd not in [*NOTEBOOKS, "all"] or len(rest) != 1:
-        print(USAGE, file=sys.stderr)
+        print(usage(), file=sys.stderr)
         return 2
     if cmd == "all":
         return 0 if check_all(rest[0]) else 1

@@ -185,6 +185,7 @@ def write_kit(out, student=True):
     for module in LIBRARY:
         with open(source_file(module)) as f:
             source = f.read()
+        os.makedirs(os.path.dirname(source_file(module, out)), exist_ok=True)   # taskexp_lib/...
         with open(source_file(module, out), "w") as f:
             f.write(stub(source, module))
     for path in glob.glob(os.path.join(COURSE, "*.py")):

@@ -7,6 +7,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Rectangle
+from matplotlib.ticker import Formatter
 
 from .geometry import BLOCK_H, BLOCK_W, TABLE_X
 
@@ -18,6 +19,26 @@ def rgb_array(canvas):
     """What a drawn FigureCanvasAgg shows, as an image (H, W, 3) uint8."""
     canvas.draw()
     return np.asarray(canvas.buffer_rgba())[..., :3].copy()
+
+
+class Metres(Formatter):
+    """Tick labels in metres, "0.15 m", with as few decimals as keep them apart: a tall figure
+    puts its ticks 0.05 m apart, where one decimal would read "0.1 m, 0.1 m, 0.2 m, 0.2 m"."""
+
+    decimals = 1
+
+    def set_locs(self, locs):
+        """Called with the ticks before they are labelled: choose the decimals for them."""
+        super().set_locs(locs)
+        self.decimals = next((d for d in (1, 2, 3) if len({self.label(v, d) for v in locs})
+                              == len(locs)), 3)
+
+    @staticmethod
+    def label(v, decimals):
+        return f"{round(v, decimals) + 0.0:.{decimals}f} m"     # + 0.0: no "-0.0"
+
+    def __call__(self, v, pos=None):
+        return self.label(v, self.decimals)
 
 
 def draw_scene(ax, state, goals=None, title=None):
@@ -39,7 +60,7 @@ def draw_scene(ax, state, goals=None, title=None):
     ax.set_aspect("equal")
     # the unit on every tick (axis labels would run into the titles below in a grid of scenes)
     for axis in (ax.xaxis, ax.yaxis):
-        axis.set_major_formatter(lambda v, _: f"{round(v, 3) + 0.0:.1f} m")     # no "-0.0"
+        axis.set_major_formatter(Metres())
     if title:
         ax.set_title(title)
     return ax

@@ -11,6 +11,9 @@ where L_k is the same loss over part k alone. With one thread the parts run one 
 other, with two side by side: the same arithmetic either way, so a run's results do not depend
 on how many threads it has. numpy releases the GIL inside BLAS and its element-wise loops, so
 Python threads are enough, and they share the networks without copying them.
+
+Agent's updates (agent.py) are written as one plain minibatch step, loss_and_grads(*nets, idx);
+DataParallel wraps that function from outside, so none of the above shows in them.
 """
 import copy
 from concurrent.futures import ThreadPoolExecutor
@@ -74,6 +77,32 @@ class Shards:
     def __exit__(self, *exc):
         if self.pool is not None:
             self.pool.shutdown()
+
+
+class DataParallel:
+    """Data-parallel gradients from outside a plain minibatch step. For fn(*nets, idx) -> a tuple
+    of means over the samples idx (losses, gradients as dicts, logged figures),
+
+        parallel(fn, idx) = sum_k (B_k / B) fn(*replicas_k, part_k)
+
+    over the SHARDS parts of idx, each part on its own replicas of the networks (so the forward
+    caches of two parts never meet), part 0 in the calling thread and the others in threads - 1
+    helper threads. This is fn(*nets, idx) up to rounding, and the same bytes for any number of
+    threads. fn must use the networks it is given, never the originals. A context manager: the
+    helpers stop on exit. Agent.data_parallel makes one with the agent's threads."""
+
+    def __init__(self, nets, threads):
+        self.replicas = [[replica(net) for net in nets] for _ in range(SHARDS)]
+        self.shards = Shards(threads)
+
+    def __call__(self, fn, idx):
+        return self.shards.mean(lambda k, part: fn(*self.replicas[k], part), idx)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.shards.__exit__(*exc)
 
 
 def read_only_map(agent, fn, items, threads):

@@ -342,6 +342,36 @@ def test_a_failed_check_raises_an_assertion_error_that_says_what_failed():
     #                                                    value as partial credit
 
 
+@pytest.mark.parametrize("ex", SIMPLE)
+def test_a_blank_and_a_solved_check_count_the_same_cases(ex, capsys):
+    """Exercise 1 once said "5 of 5 cases failed" when blank and "PASS: 6 cases" when solved: its
+    finite-difference comparison counted as a case only when the earlier cases passed. A check
+    counts the same cases whatever the answer."""
+    def blank(*args, **kwargs):
+        raise NotImplementedError()
+    with pytest.raises(AssertionError) as failed:
+        exercises.CHECKS[ex](*[blank] * len(exercises.FUNCTIONS[ex]))
+    counts = re.search(r"\((\d+) of (\d+) cases failed", str(failed.value))
+    assert counts, str(failed.value)
+    assert run_check(ex, *(R[f] for f in exercises.FUNCTIONS[ex]))
+    solved = re.search(rf"{ex} PASS: (\d+) cases", capsys.readouterr().out)
+    assert counts.group(1) == counts.group(2) == solved.group(1), (str(failed.value), solved)
+
+
+def test_ex6_introduction_says_when_relabel_returns_none_in_a_sentence(tmp_path):
+    """The introduction once read "There is no usable demonstration, return `None`, when ...":
+    the student notebook (blanked from the instructor's) says it in one clear sentence."""
+    released = os.path.join(tmp_path, exercises.NOTEBOOKS["ex6"])
+    assert released in exercises.write_notebooks(str(tmp_path))
+    for path in (instructor("ex6"), released):
+        with open(path) as f:
+            intro = "".join(json.load(f)["cells"][0]["source"])
+        assert "no usable demonstration, return" not in intro, path
+        assert re.search(r"`relabel` returns `None` when the trajectory is no usable "
+                         r"demonstration: when a block fell off the table", " ".join(intro.split())
+                         ), intro
+
+
 def test_checks_write_nothing_to_stderr(capsys):
     """nbgrader gives 0 points to a graded cell with stderr output: a student's warnings and
     prints to stderr come out on stdout, as a note, and a right answer still passes."""
@@ -514,7 +544,11 @@ def test_a_student_who_fills_in_a_different_correct_answer_passes(released, tmp_
 # ---- the instructor notebooks run top to bottom (ex7: the one reference run of the behaviour) ----
 
 @pytest.mark.parametrize("ex", list(exercises.NOTEBOOKS))
-def test_instructor_notebook_executes(ex):
+def test_instructor_notebook_executes(ex, monkeypatch):
+    # the kernel runs in course/notebooks/, and `course` is not installed (pyproject installs the
+    # library only): the repository goes on its path, as for an instructor working in a checkout
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
+        p for p in (ROOT, os.environ.get("PYTHONPATH")) if p))
     path = os.path.join(exercises.NOTEBOOK_DIR, exercises.NOTEBOOKS[ex])
     nb = nbformat.read(path, as_version=4)
     nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",

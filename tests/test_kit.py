@@ -42,10 +42,10 @@ def test_cli_release_writes_the_kit_and_never_over_the_repository(tmp_path):
     out = tmp_path / "kit"
     res = cli("release", str(out))
     assert res.returncode == 0, res.stdout + res.stderr
-    top_level = [f"{m}.py" for m in kit.LIBRARY if "." not in m]      # and taskexp_lib/
+    top_level = [f"{m}.py" for m in kit.LIBRARY if "." not in m]      # and the packages
     assert sorted(os.listdir(out)) == sorted(
-        [*exercises.NOTEBOOKS.values(), *top_level, "taskexp_lib", "requirements.txt",
-         "README.md"])
+        [*exercises.NOTEBOOKS.values(), *top_level, "taskexp_lib", "taskexp_cli", "course",
+         "requirements.txt", "README.md"])
     assert "vectors.json" in os.listdir(out / "course")
     assert cli("release", str(out)).returncode == 0                   # an earlier kit: updated
     (tmp_path / "mine").mkdir()
@@ -57,13 +57,17 @@ def test_cli_release_writes_the_kit_and_never_over_the_repository(tmp_path):
 
 def test_library_list_is_pyproject_s():
     """The kit's library is what the wheel installs: pyproject's top-level modules, and every
-    module of the taskexp_lib package (the exercises are copied apart, with their vectors)."""
+    module of its packages, taskexp_lib and taskexp_cli (the course is copied apart, with its
+    vectors)."""
     with open(os.path.join(ROOT, "pyproject.toml")) as f:
-        listed = re.search(r"py-modules = \[(.*?)\]", f.read()).group(1)
+        toml = f.read()
+    listed = re.search(r"py-modules = \[(.*?)\]", toml).group(1)
     assert sorted(re.findall(r'"(\w+)"', listed)) == sorted(m for m in kit.LIBRARY if "." not in m)
-    package = sorted(f"taskexp_lib.{name[:-3]}" for name in os.listdir(kit.PACKAGE)
-                     if name.endswith(".py"))
-    assert package == sorted(m for m in kit.LIBRARY if "." in m)
+    packages = re.findall(r'"(\w+)"', re.search(r"packages = \[(.*?)\]", toml).group(1))
+    assert sorted(map(os.path.basename, kit.PACKAGES)) == sorted(packages)
+    modules = sorted(f"{os.path.basename(p)}.{name[:-3]}" for p in kit.PACKAGES
+                     for name in os.listdir(p) if name.endswith(".py"))
+    assert modules == sorted(m for m in kit.LIBRARY if "." in m)
 
 
 def functions_of(tree):
@@ -184,3 +188,15 @@ def test_kit_runs_from_a_folder_outside_the_checkout(kit_dir, bare_python, tmp_p
     assert full.stdout.strip().splitlines()[-1] == "total: 19/19 points; 8 of 8 exercises pass"
     assert [line.split()[:2] for line in full.stdout.splitlines() if "PASS" in line] == [
         [ex, "PASS:"] for ex in exercises.NOTEBOOKS]
+
+
+def test_usage_shows_the_instructor_commands_only_in_the_repository(kit_dir):
+    """A student who types `python -m course` in the kit reads the commands they can run; the
+    instructor commands (release, course) need the reference solutions, which a kit lacks."""
+    repository, student = cli(), cli(cwd=kit_dir)
+    for res in (repository, student):
+        assert res.returncode == 2 and res.stdout == "", res.stdout
+        assert "ex1 .. ex6, ex8 NOTEBOOK" in res.stderr and "all FOLDER" in res.stderr
+    assert "release OUT" in repository.stderr and "course DIR" in repository.stderr
+    assert "release" not in student.stderr and "course DIR" not in student.stderr, \
+        student.stderr

@@ -16,7 +16,8 @@ from nbclient import NotebookClient
 from PIL import Image
 
 from env2d import BlockWorld
-from taskexp_lib.draw import animate
+from taskexp_lib.draw import animate, draw_scene
+from taskexp_lib.geometry import BLOCK_H, X_BINS
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 NOTEBOOKS = sorted(glob.glob(os.path.join(ROOT, "notebooks", "*.ipynb")))
@@ -93,6 +94,28 @@ def test_animate_gif_frames_and_html():
     html = animate(np.stack(states), [None, env.goals, {1: (0.3, 0.075)}], ["a", "b", "c"],
                    html=True)
     assert html.startswith('<img src="data:image/gif;base64,') and html.endswith('">')
+
+
+@pytest.mark.parametrize("n_blocks, figsize", [(6, (12, 4)), (6, (5.0, 2.6)), (4, (6, 3)),
+                                               (8, (12, 4))])
+def test_scene_tick_labels_never_repeat(n_blocks, figsize):
+    """Notebook 3's map of 64 candidates (6 blocks, 12 x 4 inches) once read "0.3 m, 0.3 m, 0.2 m,
+    0.2 m" up its y axis: ticks 0.05 m apart, labels with one decimal. Every label must differ."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=figsize, dpi=100)
+    FigureCanvasAgg(fig)
+    ax = fig.add_subplot()
+    state = np.zeros((n_blocks, 6))
+    state[:, 0], state[:, 1] = X_BINS[::4][:n_blocks], BLOCK_H / 2
+    draw_scene(ax, state, {0: (0.0, 2.5 * BLOCK_H)})
+    fig.canvas.draw()
+    for axis, (lo, hi) in ((ax.xaxis, ax.get_xlim()), (ax.yaxis, ax.get_ylim())):
+        locs = [v for v in axis.get_majorticklocs() if lo <= v <= hi]
+        labels = axis.get_major_formatter().format_ticks(locs)
+        assert len(set(labels)) == len(labels), labels
+        assert not any(label.startswith("-0.0") and set(label) <= set("-0. m")
+                       for label in labels), labels
 
 
 def test_the_library_never_imports_from_notebooks():

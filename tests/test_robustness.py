@@ -16,8 +16,9 @@ import pytest
 
 import agent as agent_module
 import taskexp
+import taskexp_cli as cli
 from agent import Agent
-from taskexp_lib import checkpoint, cli
+from taskexp_lib import checkpoint
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 TINY = ["--scale", "0.02"]

@@ -1,5 +1,9 @@
 """Tests of taskexp_lib/shards.py: a minibatch cut into parts gives the gradient of the whole
 minibatch, the parts' replicas share the parameters, and two threads give the same bytes as one."""
+import inspect
+import re
+import threading
+
 import numpy as np
 import pytest
 from test_agent import random_obs
@@ -8,7 +12,15 @@ import taskexp
 from agent import Agent, bc_loss, ppo_loss
 from env2d import BlockWorld, physics_pool, run_worlds
 from taskexp_lib.rollout import run_episodes
-from taskexp_lib.shards import SHARDS, Shards, read_only_map, replica, split, weighted_sum
+from taskexp_lib.shards import (
+    SHARDS,
+    DataParallel,
+    Shards,
+    read_only_map,
+    replica,
+    split,
+    weighted_sum,
+)
 
 
 def test_split_and_weighted_sum():
@@ -60,8 +72,32 @@ def test_shards_run_every_part_in_order():
                                                                               (2, 30)]
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_data_parallel_runs_a_plain_step_on_each_part(threads):
+    """DataParallel calls fn(*replicas, part) once per part, on its own replicas of the networks
+    (sharing the parameters), in one thread or in two, and weights the results by B_k / B."""
+    agent = Agent(hidden=8, seed=0)
+    calls = []
+
+    def fn(actor, critic, idx):
+        calls.append((actor, critic, idx.tolist(), threading.get_ident()))
+        return float(idx.sum()), {"g": np.full(2, float(len(idx)))}
+
+    with DataParallel([agent.actor, agent.critic], threads) as parallel:
+        total, grads = parallel(fn, np.arange(5))
+    assert total == 3 / 5 * (0 + 1 + 2) + 2 / 5 * (3 + 4)
+    assert grads["g"].tolist() == [3 / 5 * 3 + 2 / 5 * 2] * 2
+    calls.sort(key=lambda c: c[2])
+    assert [c[2] for c in calls] == [[0, 1, 2], [3, 4]]
+    assert len({c[3] for c in calls}) == threads          # both paths: one thread, or two
+    for k, net in enumerate([agent.actor, agent.critic]):
+        twins = [c[k] for c in calls]
+        assert twins[0] is not twins[1] and net not in twins
+        assert all(t.params[key] is p for t in twins for key, p in net.params.items())
+
+
 def train_bits(threads):
-    """BC, a value fit and a PPO update with `threads` threads -> every parameter's bytes."""
+    """BC, value fits and a PPO update with `threads` threads -> every parameter's bytes."""
     agent = Agent(hidden=16, seed=0)
     agent.threads = threads
     rng = np.random.default_rng(0)
@@ -71,6 +107,8 @@ def train_bits(threads):
                         np.zeros(N, int)], -1)
     agent.bc(obs, actions, 2, 256, 1e-3, rng)
     agent.fit_value(obs, rng.random(N), 1, 256, 1e-3, rng)
+    agent.fit_value_pairs(np.stack([obs, obs[::-1]], 1), rng.random((N, 2)), 1.0, 1, 128, 1e-3,
+                          rng)
     _, logp, values = agent.sample(obs, rng)
     adv = rng.standard_normal(N)
     agent.ppo_update(obs, actions, logp, adv, values + adv, epochs=2, minibatch=256, clip=0.2,
@@ -82,6 +120,14 @@ def train_bits(threads):
 def test_two_threads_give_the_same_bytes_as_one():
     assert SHARDS == 2
     assert train_bits(1) == train_bits(2)
+
+
+def test_update_methods_name_no_threads():
+    """Agent's updates read as one plain minibatch step: the cores are DataParallel's business
+    (Agent.data_parallel), so no update method's source names them."""
+    for name in ("bc", "fit_value", "fit_value_pairs", "_fit", "ppo_update"):
+        source = inspect.getsource(getattr(Agent, name))
+        assert not re.search("thread|replica|shard", source, re.I), name
 
 
 def test_base_demos_are_the_same_with_the_physics_in_workers():
