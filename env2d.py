@@ -55,7 +55,7 @@ MASS = 0.1
 FRICTION = 0.8
 SLOP = 0.001                                # allowed penetration (m); resting blocks sink this much
 # BIAS: fraction of an overlap left after one second; chipmunk's default (a tenth of it
-# corrected per substep): stiffer values rock tall stacks (README, design notes).
+# corrected per substep): stiffer values rock tall stacks (lab/notes.md, design choices).
 BIAS = 0.9 ** 60
 DROP_GAP = 0.0005                           # teleport this far above the layer centre
 FLOOR_Y = -0.5                              # the catch floor under the table

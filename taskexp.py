@@ -317,30 +317,30 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
         found = [t for t in run_episodes(agent, batch, envs, rng, bar=progress, values=False)
                  if t.success]
     asked = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
-    chosen, rules = [], (cfg.select, "init2new") if cfg.hard_picks else (cfg.select,)
-    with bar(total=len(found) * len(rules), desc="eq. (1)") as progress:
-        for rule in rules:      # equation (1) draws nothing at random: both cores share the work
-            def pick(ag, job, rule=rule):
-                progress.update(1)
-                return pieces.select_goal(ag, job[0].states[0], job[0].states[-1], job[1], rule)
-            picks = read_only_map(agent, pick, list(zip(found, asked)), agent.threads)
-            chosen += [cands[i] for cands, i in zip(asked, picks)]
-    starts = found * len(rules)                     # cfg.hard_picks: each trajectory twice
-    onward = [(traj.states[-1], goals) for traj, goals in zip(starts, chosen)]
+    with bar(total=len(found), desc="eq. (1)") as progress:
+        def pick(ag, job):      # equation (1) draws nothing at random: both cores share the work
+            progress.update(1)
+            return pieces.select_goal(ag, job[0].states[0], job[0].states[-1], job[1], cfg.select)
+        picks = read_only_map(agent, pick, list(zip(found, asked)), agent.threads)
+    chosen = [cands[i] for cands, i in zip(asked, picks)]
+    onward = [(traj.states[-1], goals) for traj, goals in zip(found, chosen)]
     with bar(total=len(onward), desc="verify") as progress:
         verified = run_episodes(agent, onward, short_envs, rng, bar=progress, values=False)
     demos, reached = [], [more.success for more in verified]
-    for traj, goals, more in zip(starts, chosen, verified):
+    for traj, goals, more in zip(found, chosen, verified):
         joined = join(traj, more, goals, more.success)
         demo = joined if more.success else pieces.relabel(joined, env)
         if demo is not None:
             demos.append(demo)
-    other = other_orders(demos, envs, rng) if cfg.other_orders else 0
+    other = 0
+    if cfg.other_orders:
+        with bar(total=sum(len(d.actions) > 1 for d in demos), desc="other orders") as progress:
+            other = other_orders(demos, envs, rng, progress)
     # picks_reached: the share of equation (1)'s picks that the policy reaches from s_T, the
     # leading indicator of whether V(s, g) tells a reachable goal from an unreachable one
     info = dict(attempts=len(batch), successful=len(found), joined=sum(reached),
                 relabelled=len(demos) - sum(reached),
-                picks_reached=sum(reached[:len(found)]) / max(len(found), 1), other_orders=other)
+                picks_reached=sum(reached) / max(len(found), 1), other_orders=other)
     return demos, info
 
 
@@ -388,10 +388,12 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
 # sec 5: zero-shot evaluation on held-out shapes, and the direct-PPO baseline
 # --------------------------------------------------------------------------------------------
 
-def evaluate(agent, tasks_by_shape, envs):
+def evaluate(agent, tasks_by_shape, envs, bar=silent):
     """Zero-shot success per shape with the greedy policy: {shape: rate}."""
-    return {name: success_rate(run_episodes(agent, tasks, envs, deterministic=True))
-            for name, tasks in tasks_by_shape.items()}
+    with bar(total=sum(map(len, tasks_by_shape.values())), desc="zero-shot") as progress:
+        return {name: success_rate(run_episodes(agent, tasks, envs, deterministic=True,
+                                                bar=progress))
+                for name, tasks in tasks_by_shape.items()}
 
 
 def direct_ppo(agent, evals, cfg, envs, short_envs, rng, pieces, bar=silent):
@@ -423,21 +425,13 @@ class Pieces:
 
 def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, log=print):
     """One round k >= 1: task expansion from the last round's tasks (sec 4.2), then
-    self-distillation on what it generated (sec 4.3). Updates `run`; returns the round's record.
-    With cfg.label_later_tasks, from round 2 on V first learns labelled outcomes of the tasks the
-    expansion starts from (round 1's critic learnt those of the base tasks in base_skills)."""
+    self-distillation on what it generated (sec 4.3). Updates `run`; returns the round's record."""
     log(f"[round {run.last_round + 1}] task expansion from {len(run.prev_tasks)} tasks")
     record = {}
-    if cfg.label_tasks and cfg.label_later_tasks and run.last_round > 0:
-        # equation (1) is about to ask V about one alteration of exactly these tasks. Labelled
-        # here rather than after a round's distillation: after the last round none would ask
-        record.update(labelled(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces,
-                               candidates, bar, log, cfg.label_later_tasks,
-                               cfg.label_later_epochs))
     demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces, bar)
     stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
     stats.update(order_stats(with_other_orders(demos)))
-    runs = info["successful"] * (2 if cfg.hard_picks else 1)      # verification runs from s_T
+    runs = info["successful"]                     # one verification run from each s_T
     unusable = runs - info["joined"] - info["relabelled"]
     log(f"  {info['attempts']} attempts, {info['successful']} successful, {runs} runs from s_T: "
         f"{info['joined']} joined, {info['relabelled']} relabelled, {unusable} unusable "
@@ -492,7 +486,7 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
                 else:
                     record = expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar,
                                              log)
-            run.results["rounds"].append(dict(round=k, eval=evaluate(agent, evals, envs),
+            run.results["rounds"].append(dict(round=k, eval=evaluate(agent, evals, envs, bar),
                                               **record))
             run.last_round = k
             if on_round:

@@ -10,11 +10,13 @@ A run directory holds round{k}.npz (the agent after round k, for agent.Agent.loa
 import argparse
 import ast
 import glob
+import hashlib
 import inspect
+import json
 import os
 import sys
 import time
-from dataclasses import fields
+from dataclasses import fields, replace
 from functools import partial
 from typing import NamedTuple
 
@@ -39,11 +41,21 @@ CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",
            "shapes": tuple(SHAPES), "dtype": ("float32", "float64"),
            "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place")}
 MIN_ZERO = {"seed", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add",
-            "label_tasks", "label_later_tasks", "label_top", "label_pair"}
+            "label_tasks", "label_top", "label_pair"}
 AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
 SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes",
-          "label_tasks", "label_later_tasks")
+          "label_tasks")
 RUN_FILES = ("results.json", "state.npz", "round*.npz")      # what a run leaves in its directory
+RUN_FIELDS = ("seed", "rounds")                   # Config fields among the run flags of --help
+ENGINEERING = ("dtype", "n_envs")                 # how it computes, not what it learns
+EXAMPLES = """examples:
+  taskexp --rounds 1 --scale 0.05           a smoke test: every budget x 0.05, under a minute
+  taskexp --rounds 3                        the default run, in runs/ours-seed0
+  taskexp --rounds 3 --seed 1               another seed, in runs/ours-seed1
+  taskexp --select end2new --rounds 1       an ablation of Table 3, in runs/end2new-seed0
+  taskexp --baseline direct-ppo --rounds 1  PPO directly on the held-out shapes
+  taskexp --resume --out runs/ours-seed0    go on after a kill or Ctrl-C
+(python taskexp.py is the same command)"""
 
 
 def field_docs(cls):
@@ -61,12 +73,34 @@ def flag(name):
     return "--blocks" if name == "n_blocks" else "--" + name.replace("_", "-")
 
 
+def beyond_the_paper(name, doc):
+    """A setting that is ours, not the paper's: its docstring says so, or it is engineering."""
+    return "not in the paper" in doc or name.startswith("label_") or name in ENGINEERING
+
+
+class Parser(argparse.ArgumentParser):
+    """A refusal is one line that names the flag, not the usage block before it."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def parser():
-    p = argparse.ArgumentParser(prog="taskexp", description=taskexp.__doc__.split("\n")[0])
+    """The command line: one flag per Config field, its help the field's docstring, in three
+    groups (the run's flags first), with examples at the end."""
+    p = Parser(prog="taskexp", description=taskexp.__doc__.split("\n")[0], epilog=EXAMPLES,
+               formatter_class=argparse.RawDescriptionHelpFormatter)
+    run = p.add_argument_group("the run")
+    paper = p.add_argument_group("the paper's hyperparameters (sec 3-5)")
+    ours = p.add_argument_group("beyond the paper (our additions, and how it computes)")
+    run.add_argument("--out", default=None,
+                     help="output directory (default runs/<variant>-seed<seed>; settings other "
+                          "than the default's add -scale<s> and a code of them)")
+    # --seed and --rounds follow (RUN_FIELDS, Config's first fields), then the run's other flags
     docs, d = field_docs(Config), Config()
     for f in fields(Config):
-        default = getattr(d, f.name)
-        text = docs.get(f.name, "").replace("%", "%%")            # argparse formats help with %
+        default, doc = getattr(d, f.name), docs.get(f.name, "")
+        text = doc.replace("%", "%%")                              # argparse formats help with %
         kw = dict(default=None, dest=f.name, help=f"{text} (default {default!r})")
         names = [flag(f.name)] + (["--n-blocks"] if f.name == "n_blocks" else [])
         if f.type is bool:
@@ -77,19 +111,19 @@ def parser():
             kw["type"] = f.type
         if f.name in CHOICES:
             kw["choices"] = CHOICES[f.name]
-        p.add_argument(*names, **kw)
-    p.add_argument("--out", default=None,
-                   help="output directory (default runs/<settings>-seed<seed>)")
-    p.add_argument("--scale", type=float, default=None,
-                   help="multiply every data and step budget (0.05: a smoke test whose "
-                        "numbers mean nothing; default 1)")
-    p.add_argument("--workers", type=int, default=None,
-                   help="processes that run the physics, and threads (at most 2) that share each "
-                        "network minibatch (default: the cores this machine lets the run use); "
-                        "the results are the same for any number")
-    p.add_argument("--resume", action="store_true",
-                   help="go on from the last complete round of the run in --out, with its settings "
-                        "(--rounds may raise the number of rounds)")
+        group = (run if f.name in RUN_FIELDS else ours if beyond_the_paper(f.name, doc)
+                 else paper)
+        group.add_argument(*names, **kw)
+    run.add_argument("--scale", type=float, default=None,
+                     help="multiply every data and step budget (0.05: a smoke test whose "
+                          "numbers mean nothing; default 1)")
+    run.add_argument("--workers", type=int, default=None,
+                     help="processes that run the physics, and threads (at most 2) that share "
+                          "each network minibatch (default: the cores this machine lets the run "
+                          "use); the results are the same for any number")
+    run.add_argument("--resume", action="store_true",
+                     help="go on from the last complete round of the run in --out, with its "
+                          "settings (--rounds may raise the number of rounds)")
     return p
 
 
@@ -110,6 +144,41 @@ def problem(cfg):
     if cfg.max_stay >= cfg.n_blocks:
         return f"--max-stay must be below --blocks ({cfg.n_blocks}), got {cfg.max_stay}"
     return None
+
+
+def scaled(cfg, scale):
+    """cfg with every data and step budget (SCALED) times scale, at least 4; 0 stays 0."""
+    cfg = replace(cfg)
+    for name in SCALED if scale != 1.0 else ():
+        budget = getattr(cfg, name)
+        if budget:                                  # label_tasks 0 (no labels) stays 0
+            setattr(cfg, name, max(4, int(round(budget * scale))))
+    return cfg
+
+
+def other_settings(cfg, scale=1.0):
+    """{flag: value} of cfg's settings that differ from the default's at the same scale."""
+    default = scaled(replace(Config(), seed=cfg.seed, rounds=cfg.rounds), scale)
+    return {flag(f.name): getattr(cfg, f.name) for f in fields(Config)
+            if getattr(cfg, f.name) != getattr(default, f.name)}
+
+
+def run_name(cfg, scale=1.0):
+    """The name of a run's default folder: the variant in words (ours, end2new, ours-nolabels,
+    ...), -scale<s> for another --scale, and a code of any other setting that is not the
+    default's, so that no run lands in the folder of a run with other settings."""
+    tag = cfg.baseline or f"{cfg.select}{'' if cfg.restrict else '-norestrict'}"
+    tag += "" if cfg.label_tasks else "-nolabels"
+    tag += "" if cfg.features == Config.features else f"-{cfg.features}"
+    tag += "" if cfg.n_blocks == Config.n_blocks else f"-{cfg.n_blocks}blocks"
+    tag += "" if scale == 1.0 else f"-scale{scale:g}"
+    said = {"--select", "--restrict", "--baseline", "--features", "--blocks"}
+    said |= set() if cfg.label_tasks else {"--label-tasks"}
+    other = {k: v for k, v in other_settings(cfg, scale).items() if k not in said}
+    if other:
+        text = json.dumps(other, sort_keys=True, default=list)
+        tag += "-" + hashlib.sha256(text.encode()).hexdigest()[:6]
+    return tag
 
 
 class Invocation(NamedTuple):
@@ -165,16 +234,8 @@ def parse_args(argv=None):
     scale = 1.0 if a.scale is None else a.scale
     if not 0 < scale <= 100:
         p.error(f"--scale must be in (0, 100], got {scale}")
-    for name in SCALED if scale != 1.0 else ():
-        budget = getattr(cfg, name)
-        if budget:                                  # label_tasks 0 (no labels) stays 0
-            setattr(cfg, name, max(4, int(round(budget * scale))))
-    tag = cfg.baseline or f"{cfg.select}{'' if cfg.restrict else '-norestrict'}"
-    tag += "" if cfg.label_tasks else "-nolabels"
-    tag += "-hard" if cfg.hard_picks else ""
-    tag += "" if cfg.features == Config.features else f"-{cfg.features}"
-    tag += "" if cfg.n_blocks == Config.n_blocks else f"-{cfg.n_blocks}blocks"
-    out = a.out or os.path.join("runs", f"{tag}-seed{cfg.seed}")
+    cfg = scaled(cfg, scale)
+    out = a.out or os.path.join("runs", f"{run_name(cfg, scale)}-seed{cfg.seed}")
     found = sorted(f for pattern in RUN_FILES for f in glob.glob(os.path.join(glob.escape(out),
                                                                               pattern)))
     if found:
@@ -266,11 +327,27 @@ def how_to_go_on(out):
             f"    python taskexp.py --resume --out {out}")
 
 
+def settings_note(cfg, out, resume, scale):
+    """What a run's settings mean for its numbers, or None for the default's."""
+    other = other_settings(cfg, scale)
+    if scale != 1.0:
+        return (f"note: --scale {scale:g} shrinks every budget: this run tests the code, and its "
+                "success rates say nothing about the method")
+    budgets = [flag(name) for name in SCALED if flag(name) in other]
+    if resume and budgets:                  # e.g. a smoke test's run, given more rounds
+        return (f"note: {out} was made with budgets other than the default's ("
+                + ", ".join(f"{b} {other[b]}" for b in budgets) + "): its success rates are not "
+                "those of the default run")
+    if other:
+        return "settings other than the default's: " + " ".join(
+            f"{k} {' '.join(map(str, v)) if isinstance(v, tuple) else v}" for k, v in other.items())
+    return None
+
+
 def main(argv=None):
     cfg, out, resume, scale, workers = parse_args(argv)
-    note = (f"note: --scale {scale:g} shrinks every budget: this run tests the code, and its "
-            "success rates say nothing about the method")
-    if scale != 1.0:
+    note = settings_note(cfg, out, resume, scale)
+    if note:
         print(note)
     try:
         results = run(cfg, out, resume=resume, workers=workers)
@@ -289,7 +366,7 @@ def main(argv=None):
         sys.exit(1)
     print(f"wrote {out}/results.json, state.npz (for --resume) and round0..{cfg.rounds}.npz "
           f"in {results['wallclock']['total_s']:.0f}s")
-    if scale != 1.0:
+    if note:
         print(note)
 
 

@@ -14,7 +14,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from .config import saved_config, upgraded
+from .config import RemovedSetting, saved_config, upgraded
 from .features import FEATURES
 from .geometry import GEOMETRY
 from .nets import NETWORKS
@@ -251,6 +251,8 @@ def saved_results(out):
             return results, None
         except FileNotFoundError:
             why.append(f"no {name}")
+        except RemovedSetting as e:                   # readable, but not by this version
+            return None, str(e)
         except (OSError, ValueError, KeyError, TypeError, IndexError, AttributeError, EOFError,
                 zipfile.BadZipFile) as e:
             why.append(f"{name} unreadable: {type(e).__name__}")

@@ -2,7 +2,7 @@
 CleanRL).
 
 Each field's docstring says what it is, the section of the paper it belongs to, and why an unusual
-value was chosen; cli.py turns every field into a command-line flag with that text as its help.
+value was chosen; taskexp_cli turns every field into a command-line flag with that text as its help.
 """
 from dataclasses import dataclass
 
@@ -23,7 +23,7 @@ class Config:
     """action budget of the verification run from s_T (sec 4.2) and of the stretch tasks"""
     hidden: int = 128
     """width of the actor's and the critic's per-block networks; the authors' state-based
-    settings use 64, which here takes two thirds of the time and learns less (README)"""
+    settings use 64, which here takes two thirds of the time and learns less (lab/notes.md)"""
     network: str = "attention"
     """sec 3: attention (self-attention over block tokens, as in the paper) | setnet (a deep set:
     blocks see each other only through pooled summaries)"""
@@ -68,7 +68,7 @@ class Config:
     stretch: float = 2.0
     """not in the paper: extra episodes per PPO update, as a fraction of ppo_episodes, on
     one-alteration variants of the tasks, so that V(s, g) learns what it cannot reach yet; with
-    plain features V must learn from them whether a goal has a support (README, design notes)"""
+    plain features V must learn from them whether a goal has a support (lab/notes.md)"""
     ppo_epochs: int = 4
     """PPO epochs over each batch"""
     ppo_minibatch: int = 256
@@ -98,10 +98,6 @@ class Config:
     """sec 4.2: goal selection, ours (eq. 1) | end2new | init2new (Table 3 ablations)"""
     restrict: bool = True
     """sec 4.2: one alteration; False draws unrelated random tasks (Table 3 "w/o restriction")"""
-    hard_picks: bool = False
-    """not in the paper: each s_T is also run toward init2new's pick, argmin V(s0, g), the
-    candidate hardest from s_0. Almost always relabelled, these runs show blocks moved under and
-    onto others, which the one-drop extensions that equation (1) picks never show"""
     other_orders: bool = True
     """sec 4.2, not in the paper: BC learns each generated demonstration's moves in another order
     too, where the simulator, replaying them so from s_0, meets the same goals; the data then
@@ -112,14 +108,6 @@ class Config:
     many tasks, after the base PPO; 0 = off (V learns from PPO alone, as in the paper). The policy
     runs toward one-alteration candidates from s_T and s_0 on the short budget, and V is regressed
     on the discounted outcomes"""
-    label_later_tasks: int = 0
-    """label_tasks: label before every later task expansion too, on this many of the tasks it
-    starts from (the last round's new ones); 0 = only after the base PPO. Off by default since
-    2026-12-05: with free table spots, 2000 later labels took most of rounds 1-3's time and left
-    seed 0 lower after round 2 (39% zero-shot against 51% without; one seed, lab/discussion.md)"""
-    label_later_epochs: int = 30
-    """label_later_tasks: epochs of those later value regressions (split as label_epochs is).
-    (30 was the default's until 2026-12-04, with 2000 later tasks)"""
     label_per: int = 4
     """label_tasks: candidates labelled per successful trajectory"""
     label_top: int = 2
@@ -152,19 +140,28 @@ class Config:
 
 # Fields added since runs were first kept, each with the value that does what the code before it
 # did: a run saved without the field resumes with that value
-ADDED = {"hard_picks": False, "other_orders": False}       # 2026-12-02, 2026-12-04
+ADDED = {"other_orders": False}                                # 2026-12-04
+# Fields removed since, each with the only value today's code can go on with: they served variants
+# whose findings are in lab/notes.md (hard_picks, label_later_*: measured at main f915fea)
+REMOVED = {"hard_picks": False, "label_later_tasks": 0, "label_later_epochs": None,
+           "label_every_round": False}
+
+
+class RemovedSetting(ValueError):
+    """A run saved with a setting this version no longer has, at a value it cannot go on with."""
 
 
 def upgraded(settings):
     """A run's saved settings (a dict) in today's field names, so that runs made by earlier code
-    still load and resume: label_every_round (until 2026-12-02) labelled the later rounds with
-    label_tasks and label_epochs, which is what label_later_tasks and label_later_epochs now say;
-    a field of ADDED that the run does not have takes its value there."""
+    still load and resume: a field of ADDED that the run does not have takes its value there; a
+    field of REMOVED is dropped if it holds the value today's code runs (None: any value), and
+    refused otherwise (RemovedSetting)."""
     settings = {**ADDED, **settings}
-    if "label_every_round" in settings:
-        on = settings.pop("label_every_round")
-        settings.update(label_later_tasks=settings["label_tasks"] if on else 0,
-                        label_later_epochs=settings["label_epochs"])
+    for name, value in REMOVED.items():
+        if name in settings and value is not None and settings[name] != value:
+            raise RemovedSetting(f"made with {name}={settings[name]!r}, a setting this version "
+                                 "no longer has (lab/notes.md); go on with main f915fea's code")
+        settings.pop(name, None)
     return settings
 
 

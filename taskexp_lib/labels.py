@@ -8,10 +8,9 @@ policy runs toward candidates from s_T and from s_0 on the short budget, each ru
 states with its discounted outcome, and the critic is regressed on the labels and, pair by pair,
 on the difference equation (1) ranks by (agent.pair_value_loss). No geometric rule and no
 look-ahead scores a candidate at selection time: the critic still has to learn it.
-Most of a labelling's cost is the value fit, and fewer epochs pick worse. Before the later
-expansions the critic only has to follow the new tasks, so they have their own budget
-(label_later_tasks, label_later_epochs; lab/bench/label_budget.py measures one); a sixth of it
-still picks nearly as well, but the rounds after it build fewer tall tasks (README).
+Most of a labelling's cost is the value fit, and fewer epochs pick worse. It runs once, after the
+base PPO: labelling again before every later expansion cost most of rounds 1-3's time and did not
+raise zero-shot success (lab/notes.md).
 """
 import numpy as np
 
@@ -39,10 +38,9 @@ def top_candidates(agent, traj, cands, k, pieces, mode):
     return top
 
 
-def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar, count=None,
-                   epochs=None):
-    """Label, then fit V, cfg.label_iters times; each time on count / label_iters tasks (count:
-    cfg.label_tasks unless given) and for epochs / label_iters epochs (cfg.label_epochs).
+def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar):
+    """Label, then fit V, cfg.label_iters times; each time on cfg.label_tasks / label_iters tasks
+    and for cfg.label_epochs / label_iters epochs.
 
     1. run the policy on the tasks and keep the successes s0 -> sT;
     2. for each, draw K one-alteration candidates (candidates: taskexp.candidates, as task
@@ -58,12 +56,13 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
     env = envs[0]
     obs, targets, pairs, pair_targets = [], [], [], []
     n_runs, n_reached, loss = 0, 0, []
-    count = cfg.label_tasks if count is None else count
-    epochs = -(-(cfg.label_epochs if epochs is None else epochs) // cfg.label_iters)
+    epochs = -(-cfg.label_epochs // cfg.label_iters)             # ceil(label_epochs / iters)
     for it in range(cfg.label_iters):
-        size = count // cfg.label_iters
+        size = cfg.label_tasks // cfg.label_iters
         batch = [tasks[i] for i in rng.integers(len(tasks), size=size)]
-        found = [t for t in run_episodes(agent, batch, envs, rng, values=False) if t.success]
+        with bar(total=len(batch), desc=f"collect {it + 1}") as progress:
+            found = [t for t in run_episodes(agent, batch, envs, rng, bar=progress, values=False)
+                     if t.success]
         drawn = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
         with bar(total=len(found), desc=f"rank {it + 1}") as progress:
             def rank(ag, job):
@@ -100,11 +99,9 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
                 label_success=n_reached / max(n_runs, 1), label_loss=loss)
 
 
-def labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar, log, count=None,
-             epochs=None):
+def labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar, log):
     """label_outcomes, logged -> its record."""
-    out = label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar, count,
-                         epochs)
+    out = label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar)
     loss = out["label_loss"] or [float("nan")]
     log(f"  V on {out['label_rows']} labelled states from {out['label_runs']} runs "
         f"({out['label_success']:.0%} reached): loss {loss[0]:.3f} -> {loss[-1]:.3f}")

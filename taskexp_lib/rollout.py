@@ -143,11 +143,11 @@ def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None, va
                 start(k)
 
 
-def replay(tasks, plans, envs):
+def replay(tasks, plans, envs, bar=None):
     """Play fixed sequences of actions: for tasks[i] = (state, goals), the actions plans[i] (T, 3)
     in order, len(envs) tasks at a time, until the goals hold (stable) or the plan ends; the
     worlds' step budget does not cut a plan. Returns a list of Trajectory in the order of tasks,
-    success True when the goals held at the end."""
+    success True when the goals held at the end. bar: a progress bar to advance per task."""
     out = []
     for start in range(0, len(tasks), len(envs)):
         chunk = range(start, min(start + len(envs), len(tasks)))
@@ -166,6 +166,8 @@ def replay(tasks, plans, envs):
         for k, i in enumerate(chunk):
             played = np.asarray(plans[i])[:len(states[k]) - 1]
             out.append(Trajectory(tasks[i][1], np.stack(states[k]), played, done[k]))
+        if bar is not None:
+            bar.update(len(chunk))
     return out
 
 

@@ -1,7 +1,6 @@
 """The reproduction report end to end at a tiny budget: lab/bench/reproduce.py runs its variants,
 writes RESULTS.md with every table and the targets, and the figures it links to; the README's
 headline is what the runs kept in lab/results/runs/ say (lab/bench/headline.py);
-lab/bench/label_budget.py measures a labelling budget from one of its runs;
 lab/bench/bench_speed.py times every phase of a run and counts the operations of its matrix
 products; lab/bench/value_fit.py replays a run's value fits."""
 import os
@@ -57,15 +56,17 @@ def test_reproduce_writes_the_report(tmp_path):
     headline.keep([tmp_path / "runs" / f"ours-seed{s}" for s in (0, 1)], kept=kept)
     runs = headline.load("ours", kept=kept)
     assert [r["config"]["seed"] for r in runs] == [0, 1] and "feasible" in runs[0]
-    assert not any(line.startswith("| w/o restriction") for line in headline.headline(
-        {"ours": runs})), "Table 3 without kept ablations"
+    assert not any(line.startswith("| w/o restriction") for line in headline.comparison(
+        {"ours": runs}) + headline.headline({"ours": runs})), "Table 3 without kept ablations"
     # an ablation kept too: judged by its own rule, and a row of Table 3
     headline.keep([tmp_path / "runs" / f"ours-norestrict-seed{s}" for s in (0, 1)], kept=kept)
     by_variant = headline.load_all(kept=kept)
     assert by_variant["ours-norestrict"][1]["feasible"]["restrict"] is False
     assert runs[1]["feasible"]["restrict"] is True
-    lines = headline.headline(by_variant)
+    lines = headline.comparison(by_variant)
     assert sum(line.startswith("| w/o restriction |") for line in lines) == 1
+    assert sum(line.startswith("| w/o restriction (`--no-restrict`) |")
+               for line in headline.headline(by_variant)) == 1
     readme = tmp_path / "README.md"
     readme.write_text(f"intro\n{headline.BEGIN}\nold\n{headline.END}\nrest\n")
     headline.write_readme(readme, lines)
@@ -84,13 +85,6 @@ def test_reproduce_writes_the_report(tmp_path):
     assert tables((tmp_path / "K.md").read_text()) == tables(text)
     missing = subprocess.run(report + ["direct-ppo"], cwd=tmp_path, capture_output=True, text=True)
     assert missing.returncode != 0 and "keeps no plain direct-ppo run of seed 0" in missing.stderr
-    # a later round's labelling budget measured from a run's resume state, and none
-    for tasks in ("20", "0"):
-        printed = subprocess.run([sys.executable, os.path.join(BENCH, "label_budget.py"),
-                                  str(tmp_path / "runs" / "ours-seed0"), "--tasks", tasks,
-                                  "--epochs", "2", "--attempts", "20"], check=True,
-                                 capture_output=True, text=True).stdout
-        assert re.search(rf"{tasks} tasks labelled, 2 epochs: \d+ s; \d+% of \d+ picks", printed)
 
 
 def test_the_readme_headline_is_what_the_kept_runs_say():
@@ -113,6 +107,8 @@ def test_the_readme_headline_is_what_the_kept_runs_say():
             made = cli.parse_args(argv).cfg
             assert saved_config(r["config"]) == made, f"{variant} seed {seed}: not its flag alone"
     assert headline.readme_block(os.path.join(ROOT, "README.md")) == headline.headline(by_variant)
+    notes = os.path.join(ROOT, "lab", "notes.md")
+    assert headline.readme_block(notes) == headline.comparison(by_variant)
 
 
 def test_results_md_is_what_the_kept_runs_say(tmp_path):

@@ -21,7 +21,9 @@ from agent import Agent
 from taskexp_lib import checkpoint
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-TINY = ["--scale", "0.02"]
+# budgets x 0.02, and fewer epochs: the fits are most of a tiny run's time, and what these tests
+# check (refusals, resume, workers, memory) does not depend on how well the networks learn
+TINY = ["--scale", "0.02", "--bc-epochs", "2", "--label-epochs", "6"]
 PPO = dict(epochs=1, minibatch=16, clip=0.2, ent_coef=0.0, vf_coef=0.5, lr=1e-3, max_grad_norm=0.5)
 
 
@@ -61,7 +63,8 @@ def test_cli_refuses_bad_arguments_in_one_line(argv, reason, capsys):
     with pytest.raises(SystemExit) as e:
         cli.parse_args(argv)
     err = capsys.readouterr().err.strip().splitlines()
-    assert e.value.code == 2 and reason in err[-1] and "Traceback" not in "".join(err)
+    assert e.value.code == 2 and len(err) == 1, err                  # no usage block before it
+    assert reason in err[0] and err[0].endswith("(see --help)")
 
 
 @pytest.mark.parametrize("leftover", ["results.json", "state.npz", "round0.npz"])
@@ -109,6 +112,36 @@ def test_every_config_field_is_a_flag():
     assert (cfg.ppo_steps, cfg.restrict, cfg.shapes, cfg.p_add) == (123, False, ("I", "Y"), 0.25)
 
 
+def test_help_shows_the_run_flags_first_then_the_paper_then_ours_then_examples():
+    help_text = cli.parser().format_help()
+    at = {name: help_text.index(name) for name in (
+        "the run:", "the paper's hyperparameters", "beyond the paper", "examples:")}
+    assert list(at) == sorted(at, key=at.get)
+    options = help_text[at["the run:"]:]
+    run = [options.index(f"\n  {name} ") for name in (
+        "--out", "--seed", "--rounds", "--scale", "--workers", "--resume")]
+    assert run == sorted(run) and run[-1] < options.index("the paper's hyperparameters")
+    paper = options[options.index("the paper's"):options.index("beyond the paper")]
+    assert "--candidates" in paper and "--label-tasks" not in paper and "--stretch" not in paper
+    assert "taskexp --rounds 1 --scale 0.05" in help_text[at["examples:"]:]
+
+
+def test_no_run_lands_in_the_folder_of_a_run_with_other_settings(tmp_path, monkeypatch):
+    """The smoke test (--scale) and any setting not the default's name their own folder: the
+    default run never finds (and --resume never goes on with) a run of other budgets there."""
+    monkeypatch.chdir(tmp_path)
+    out = lambda *argv: cli.parse_args(list(argv)).out
+    default = os.path.join("runs", "ours-seed0")
+    assert out() == out("--rounds", "1") == default
+    smoke = out("--rounds", "1", "--scale", "0.05")
+    assert smoke == os.path.join("runs", "ours-scale0.05-seed0")
+    others = [out("--ppo-steps", "123"), out("--ppo-steps", "124"), out("--label-tasks", "500"),
+              out("--scale", "0.05", "--candidates", "8"), smoke]
+    assert default not in others and len(set(others)) == len(others), others
+    assert out("--ppo-steps", "123") == out("--ppo-steps", "123")            # the same settings
+    assert out("--ppo-steps", str(taskexp.Config.ppo_steps)) == default      # are the default's
+
+
 def test_blocks_flag_names_the_run_and_reaches_the_world(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)                     # runs/ here holds no run of these names
     cfg, out, *_ = cli.parse_args(["--blocks", "7"])
@@ -136,6 +169,8 @@ def test_killed_run_resumes_to_the_same_results(tmp_path, capsys):
     capsys.readouterr()
     cli.main(["--resume", "--out", killed])
     log = capsys.readouterr().out
+    # a run at another scale never goes on silently: the note says whose budgets these are
+    assert log.startswith(f"note: {killed} was made with budgets other than the default's (")
     # went on from the saved round rather than starting again (which would also give equal files)
     assert (f"resuming {killed} after round " in log and "[round 0]" not in log
             and "round 1:" not in log)
@@ -170,33 +205,41 @@ def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
             and "state.npz: not a readable" in err[0])
 
 
-def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path):
-    """Settings saved before label_every_round became label_later_tasks and label_later_epochs,
-    and before hard_picks and other_orders existed, still resume (config.upgraded), to the results
-    of a run never stopped."""
+def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path, capsys):
+    """Settings saved before other_orders existed, and with fields removed since at the values
+    today's code runs (config.REMOVED), still resume (config.upgraded), to the results of a run
+    never stopped; a run that used a removed setting is refused in one line that names it."""
     old, new = str(tmp_path / "old"), str(tmp_path / "new")
-    before = ["--label-later-tasks", "2000", "--no-other-orders"]      # what the code then did
-    cli.main(["--rounds", "1", *TINY, *before, "--out", old])
+    cli.main(["--rounds", "1", *TINY, "--no-other-orders", "--out", old])   # what the code did
 
-    def as_before(settings):                       # the settings as the code before saved them
-        settings = dict(settings, label_every_round=settings["label_later_tasks"] > 0)
-        assert settings.pop("label_later_tasks") == settings["label_tasks"]
-        assert settings.pop("label_later_epochs") == settings["label_epochs"]
-        assert settings.pop("hard_picks") is False
+    def as_before(settings, **removed):            # the settings as the code before saved them
+        settings = dict(settings, hard_picks=False, label_later_tasks=0, label_later_epochs=30,
+                        **removed)
         assert settings.pop("other_orders") is False
         return settings
-    with open(os.path.join(old, "results.json")) as f:
-        results = json.load(f)
-    checkpoint.save_json(os.path.join(old, "results.json"),
-                         dict(results, config=as_before(results["config"])))
-    with np.load(os.path.join(old, "state.npz")) as z:
-        state = dict(z)
-    saved = json.loads(str(state["results"]))
-    state["results"] = np.array(json.dumps(dict(saved, config=as_before(saved["config"]))))
-    checkpoint.save_npz(os.path.join(old, "state.npz"), state)
+
+    def save_as_before(**removed):
+        with open(os.path.join(old, "results.json")) as f:
+            results = json.load(f)
+        checkpoint.save_json(os.path.join(old, "results.json"),
+                             dict(results, config=as_before(results["config"], **removed)))
+        with np.load(os.path.join(old, "state.npz")) as z:
+            state = dict(z)
+        saved = json.loads(str(state["results"]))
+        state["results"] = np.array(json.dumps(dict(saved, config=as_before(saved["config"],
+                                                                           **removed))))
+        checkpoint.save_npz(os.path.join(old, "state.npz"), state)
+
+    save_as_before()
     cli.main(["--resume", "--rounds", "2", "--out", old])
-    cli.main(["--rounds", "2", *TINY, *before, "--out", new])
+    cli.main(["--rounds", "2", *TINY, "--no-other-orders", "--out", new])
     assert results_without_clock(old) == results_without_clock(new)
+    save_as_before(label_later_tasks=40)           # labels before every later round: gone
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        cli.parse_args(["--resume", "--rounds", "3", "--out", old])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "label_later_tasks=40" in err[0], err
 
 
 def test_any_number_of_workers_gives_the_same_bytes(tmp_path):

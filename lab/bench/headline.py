@@ -1,4 +1,6 @@
-"""The README's headline: the default run over seeds, written from the runs it names.
+"""The README's headline, one table of the default run and Table 3's rows against the paper, and
+the longer comparison in lab/notes.md (every variant, Tables 1-3 round by round), both written
+from the runs they name.
 
     python lab/bench/headline.py --keep runs/ours-seed0 runs/ours-seed1 runs/ours-seed2
     python lab/bench/run_seeds.py --rounds 1 --variants end2new no-restrict direct-ppo
@@ -6,14 +8,15 @@
     python lab/bench/headline.py --keep runs/end2new-seed0 ...     # Table 3: the ablations
     python lab/bench/headline.py                    # print it from the kept copies
     python lab/bench/headline.py --readme README.md  # write it into the README between its markers
+    python lab/bench/headline.py --notes lab/notes.md  # the comparison, into the lab notes
 
 --keep copies each finished run's results.json, with its round-0 critic's feasibility
 (lab/bench/feasible_goals.py, 600 base tasks, with the run's own selection rule) and each round's
 first moves (lab/bench/build_order.py), both measured once and cached in the run's folder, and
 this machine's name (keep runs where they were made), to lab/results/runs/<run>.json. Those copies
 are committed: the headline is made from them alone, and tests/test_bench.py checks that the
-README shows exactly what they say. lab/results/runs/main-9032628/ keeps the runs of the code before
-2026-12-05 (its default then, the relations, the ablations), for comparison.
+README and the notes show exactly what they say. lab/results/runs/main-9032628/ keeps the runs
+of the code before 2026-12-05 (its default then, the relations, the ablations), for comparison.
 """
 import argparse
 import json
@@ -25,7 +28,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import reproduce  # noqa: E402
 from reproduce import PAPER_T1, PAPER_T2, success, table1, table2, table3  # noqa: E402
-from run_seeds import KEPT, kept_name, load, pm  # noqa: E402
+from run_seeds import FLAGS, KEPT, kept_name, load, pm  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
 BEGIN = "<!-- headline: written by `python lab/bench/headline.py --readme README.md` -->"
@@ -72,8 +75,40 @@ def kept_names():
 
 
 def headline(by_variant):
-    """The headline as markdown lines: the default next to the run without labelled outcomes,
-    each mean +- std over the seeds kept, then the default's Tables 1 and 2 round by round."""
+    """The README's headline as markdown lines: one table, zero-shot success of the default
+    round by round and of Table 3's rows after round 1, each mean +- std over the seeds kept,
+    next to the paper's; then the tall tasks generated, round by round."""
+    ours = by_variant["ours"]
+    rounds, shapes = ours[0]["config"]["rounds"], list(ours[0]["config"]["shapes"])
+    every = range(1, rounds + 1)
+    paper = lambda k: np.mean([PAPER_T2[s][k - 1] for s in shapes])
+    out = ["| zero-shot success, mean over " + ", ".join(f'"{s}"' for s in shapes) + " |"
+           + "".join(f" round {k} |" for k in every) + f" round {rounds} by shape |"
+           + " the paper |", "|---" * (rounds + 3) + "|"]
+    by_shape = " / ".join(f"{np.mean([success(r, rounds, s) for r in ours]):.0f}" for s in shapes)
+    out.append("| **ours**, `python taskexp.py --rounds 3` |"
+               + "".join(f" {pm([success(r, k) for r in ours], '%')} |" for k in every)
+               + f" {by_shape} (%) | " + " / ".join(f"{paper(k):.0f}" for k in every) + " (%) |")
+    for v in ABLATIONS:                               # Table 3 and direct PPO: after round 1
+        runs = by_variant.get(kept_name(v))
+        if runs:
+            out.append(f"| {reproduce.NAMES[v]} (`{' '.join(FLAGS[v])}`) | "
+                       f"{pm([success(r, 1) for r in runs], '%')} |" + " - |" * rounds
+                       + f" {np.mean(reproduce.PAPER_T3[v]):.0f}% after round 1 |")
+    seeds = ", ".join(str(r["config"]["seed"]) for r in ours)
+    tall = " / ".join(f"{np.mean([r['rounds'][k]['high_goal_tasks'] for r in ours]):.0f}"
+                      for k in every)
+    return [*out, "", f"Seeds {seeds}, mean +- std over the seeds. The paper's figures are from a "
+            "3D world with about 150M PPO steps per round; for the ablations, the mean of its "
+            "Table 3. Tasks generated with >= 3 goals above the ground, rounds "
+            f"{' / '.join(map(str, every))}: {tall} (the paper: "
+            f"{' / '.join(map(str, PAPER_T1['high_goal_tasks']))})."]
+
+
+def comparison(by_variant):
+    """The lab notes' comparison as markdown lines: the default next to the run without labelled
+    outcomes and the code before, each mean +- std over the seeds kept, then the default's
+    Tables 1 and 2 round by round and Table 3."""
     ours = by_variant["ours"]
     rounds, shapes = ours[0]["config"]["rounds"], list(ours[0]["config"]["shapes"])
     earlier, every = range(1, rounds), " / ".join(map(str, range(1, rounds + 1)))
@@ -143,7 +178,7 @@ def ablations(by_variant):
 
 
 def write_readme(path, lines):
-    """Replace the block between BEGIN and END in the README at `path` by `lines`."""
+    """Replace the block between BEGIN and END in the README (or notes) at `path` by `lines`."""
     with open(path) as f:
         text = f.read()
     if BEGIN not in text or END not in text:
@@ -164,17 +199,20 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--keep", nargs="+", metavar="RUN", help="finished run folders to keep first")
     p.add_argument("--readme", help="write the headline into this README between its markers")
+    p.add_argument("--notes", help="write the comparison into these notes between its markers")
     a = p.parse_args()
     if a.keep:
         keep(a.keep)
     by_variant = load_all()
     if not by_variant["ours"]:
         raise SystemExit(f"no kept runs in {os.path.relpath(KEPT, ROOT)}: --keep RUN ... first")
-    lines = headline(by_variant)
-    print("\n".join(lines))
-    if a.readme:
-        write_readme(a.readme, lines)
-        print("wrote the headline into", a.readme)
+    lines, notes = headline(by_variant), comparison(by_variant)
+    print("\n".join(lines + [""] + notes))
+    for path, block, what in ((a.readme, lines, "the headline"),
+                              (a.notes, notes, "the comparison")):
+        if path:
+            write_readme(path, block)
+            print(f"wrote {what} into {path}")
 
 
 if __name__ == "__main__":

@@ -24,19 +24,16 @@ from taskexp_lib.config import Config
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"],
-         "no-labels": ["--label-tasks", "0"], "hard-picks": ["--hard-picks"],
-         "expand6000": ["--expand-episodes", "6000"], "relations": ["--features", "relations"],
-         "hard-expand6000": ["--hard-picks", "--expand-episodes", "6000"],
-         "hidden64": ["--hidden", "64"], "later2000": ["--label-later-tasks", "2000"]}
+         "no-labels": ["--label-tasks", "0"], "expand6000": ["--expand-episodes", "6000"],
+         "relations": ["--features", "relations"], "hidden64": ["--hidden", "64"]}
 
 
 # finished runs' results.json, copied by lab/bench/headline.py --keep and committed
 KEPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "results", "runs")
-# as taskexp.py names its default directories
-DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels", "hard-picks": "ours-hard",
-        "expand6000": "ours-expand6000", "relations": "ours-relations",
-        "hard-expand6000": "ours-hard-expand6000", "hidden64": "ours-h64",
-        "later2000": "ours-later2000"}
+# as taskexp.py names its default directories (expand6000 and hidden64: a name of ours, where
+# taskexp.py would add a code of the setting)
+DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels",
+        "expand6000": "ours-expand6000", "relations": "ours-relations", "hidden64": "ours-h64"}
 
 
 def kept_name(variant, features=Config.features):

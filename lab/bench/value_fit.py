@@ -3,7 +3,7 @@
     python lab/bench/value_fit.py                            # seed 0, the run's own fits (~10 min)
     python lab/bench/value_fit.py --epochs 20 --batch 256 1024 --lr 1e-3 3e-3 --plot fits.png
 
-Most of a default run's time is its value fits (README, Time), so this asks whether they could
+Most of a default run's time is its value fits (lab/notes.md, Time), so this asks whether they could
 stop earlier or take fuller steps. It runs round 0 of the default run (base skills, sec 4.1,
 then the labelled outcomes of taskexp_lib/labels.py) with an agent that keeps what each of its
 value fits started from: the labels, the critic, its Adam state and the Generator. Then it
