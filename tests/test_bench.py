@@ -2,7 +2,9 @@
 writes RESULTS.md with every table and the targets, and the figures it links to; the README's
 headline is what the runs kept in lab/results/runs/ say (lab/bench/headline.py);
 lab/bench/bench_speed.py times every phase of a run and counts the operations of its matrix
-products; lab/bench/value_fit.py replays a run's value fits."""
+products; lab/bench/value_fit.py replays a run's value fits; lab/bench/run_seeds.py hands its runs
+to an engine (lab/bench/engine.py, submitit)."""
+import json
 import os
 import re
 import subprocess
@@ -14,6 +16,7 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BENCH = os.path.join(ROOT, "lab", "bench")
 sys.path.insert(0, BENCH)
 import bench_speed  # noqa: E402
+import engine  # noqa: E402
 import headline  # noqa: E402
 import value_fit  # noqa: E402
 from run_seeds import FLAGS  # noqa: E402
@@ -29,7 +32,8 @@ def test_reproduce_writes_the_report(tmp_path):
     subprocess.run([sys.executable, os.path.join(BENCH, "reproduce.py"), "--seeds", "0",
                     "1", "--features", "plain", "--variants", "ours", "direct-ppo", "no-restrict",
                     "--rounds", "2", "--direct-rounds", "1", "--scale", "0.02", "--root",
-                    str(tmp_path / "runs"), "--out", str(out), "--figures", str(figs)],
+                    str(tmp_path / "runs"), "--out", str(out), "--figures", str(figs),
+                    "--", "--label-epochs", "6"],                # fewer value-fit epochs
                    check=True, cwd=tmp_path,
                    capture_output=True)
     text = out.read_text()
@@ -195,3 +199,37 @@ def test_value_fit_replays_the_runs_fits():
                                         holdout=0.5)
         assert np.isfinite(curve).all()
         assert any((p != fit["after"][k]).any() for k, p in agent.critic.params.items())
+
+
+def test_engine_runs_the_seeds_as_direct_runs_do_and_reuses_them(tmp_path):
+    """lab/bench/run_seeds.py hands its runs to submitit's local executor: two tiny runs (two
+    seeds) give the bytes of the same runs made directly, and a second call starts none."""
+    root = tmp_path / "runs"
+    seeds = [sys.executable, os.path.join(BENCH, "run_seeds.py"), "--seeds", "0", "1",
+             "--rounds", "1", "--scale", "0.02", "--root", str(root), "--", "--label-epochs", "6"]
+    first = subprocess.run(seeds, check=True, capture_output=True, text=True, cwd=tmp_path)
+    assert "0 of 2 runs finished already; 2 to go" in first.stdout, first.stdout
+    for seed in (0, 1):
+        direct = tmp_path / f"direct{seed}"
+        cli.main(["--rounds", "1", "--scale", "0.02", "--seed", str(seed), "--label-epochs", "6",
+                  "--out", str(direct)])
+        made = root / f"ours-seed{seed}"
+        for name in ("round0.npz", "round1.npz"):
+            assert (made / name).read_bytes() == (direct / name).read_bytes(), (seed, name)
+        results = [json.loads((d / "results.json").read_text()) for d in (made, direct)]
+        assert [{**r, "wallclock": None} for r in results][0] == {**results[1], "wallclock": None}
+    again = subprocess.run(seeds, check=True, capture_output=True, text=True, cwd=tmp_path)
+    assert "2 of 2 runs finished already; 0 to go" in again.stdout, again.stdout
+    assert "| ours | " in again.stdout                             # the tables, as before
+
+
+def test_engine_reports_a_failed_run_with_its_log_and_finishes_the_others(tmp_path):
+    fail = [sys.executable, "-c", "import sys; print('went wrong here'); sys.exit(3)"]
+    ok = [sys.executable, "-c", "print('fine')"]
+    said = []
+    failed = engine.run_all({"bad": (fail, str(tmp_path / "bad.log")),
+                             "good": (ok, str(tmp_path / "good.log"))},
+                            str(tmp_path / "jobs"), jobs=2, say=said.append)
+    assert failed == {"bad": "went wrong here\n"}
+    assert "finished good" in said and any(s.startswith("FAILED bad") for s in said), said
+    assert (tmp_path / "good.log").read_text() == "fine\n"

@@ -21,9 +21,9 @@ from agent import Agent
 from taskexp_lib import checkpoint
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# budgets x 0.02, and fewer epochs: the fits are most of a tiny run's time, and what these tests
-# check (refusals, resume, workers, memory) does not depend on how well the networks learn
-TINY = ["--scale", "0.02", "--bc-epochs", "2", "--label-epochs", "6"]
+# budgets x 0.02, and fewer value-fit epochs (a third of a tiny run's time): what these tests check
+# (refusals, resume, workers, memory) does not depend on how well V(s, g) is fitted
+TINY = ["--scale", "0.02", "--label-epochs", "6"]
 PPO = dict(epochs=1, minibatch=16, clip=0.2, ent_coef=0.0, vf_coef=0.5, lr=1e-3, max_grad_norm=0.5)
 
 
@@ -213,8 +213,8 @@ def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path, capsys):
     cli.main(["--rounds", "1", *TINY, "--no-other-orders", "--out", old])   # what the code did
 
     def as_before(settings, **removed):            # the settings as the code before saved them
-        settings = dict(settings, hard_picks=False, label_later_tasks=0, label_later_epochs=30,
-                        **removed)
+        settings = {**settings, "hard_picks": False, "label_later_tasks": 0,
+                    "label_later_epochs": 30, **removed}
         assert settings.pop("other_orders") is False
         return settings
 

@@ -32,7 +32,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import build_order  # noqa: E402
-from run_seeds import KEPT, kept_name, load, pm, run_dir, run_one  # noqa: E402
+from run_seeds import KEPT, kept_name, load, pm, run_dir, run_one, split_argv  # noqa: E402
 
 LAB = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))     # lab/: the report, notes
 
@@ -250,7 +250,8 @@ def main():
                         "where lab/bench/headline.py --keep copies them) instead of making them")
     p.add_argument("--out", default=os.path.join(LAB, "RESULTS.md"))
     p.add_argument("--figures", default=os.path.join(LAB, "results"), help="folder for the figures")
-    a = p.parse_args()
+    ours, theirs = split_argv(sys.argv[1:])        # after `--`: flags for every new run
+    a = p.parse_args(ours)
     if "ours" not in a.variants:
         p.error("--variants must include ours: every table compares with it")
     os.makedirs(a.figures, exist_ok=True)
@@ -278,7 +279,7 @@ def main():
         f, v, s = job
         root = a.root if f == Config.features else os.path.join(a.root, f)
         os.makedirs(root, exist_ok=True)
-        extra = ["--features", f] + (["--scale", a.scale] if a.scale else [])
+        extra = ["--features", f] + (["--scale", a.scale] if a.scale else []) + theirs
         print(f"[{time.time() - start:5.0f}s] {f} {v} seed {s}", flush=True)
         results = run_one(v, s, rounds_of(v), root, extra)[2]
         if v == "ours":                   # the leading indicators: the critic's, the actor's

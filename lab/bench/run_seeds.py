@@ -3,11 +3,16 @@
     python lab/bench/run_seeds.py --seeds 0 1 2                       # ours, default budget
     python lab/bench/run_seeds.py --seeds 0 1 2 --variants ours direct-ppo end2new init2new \
         no-restrict
+    python lab/bench/run_seeds.py --seeds 0 1 2 --slurm PARTITION --jobs 15   # on a cluster
+    python lab/bench/run_seeds.py --seeds 0 1 --scale 0.1 -- --ppo-steps 40000  # flags for taskexp
 
-Each run is a separate `taskexp.py` process (one worker: two runs at a time use the two cores)
+Each run is a separate `taskexp.py` process, handed to an engine (lab/bench/engine.py: submitit),
 writing runs/<variant>-seed<k>, or the directory DIRS names (no-restrict:
-runs/ours-norestrict-seed<k>, as `taskexp.py` would name it itself), where the notebooks look for
-them. Prints a markdown table per variant and round.
+runs/ours-norestrict-seed<k>, as `taskexp.py` would name it itself), where the notebooks and
+lab/bench/reproduce.py look for them. On this machine --jobs runs go at a time with one worker
+each (two runs use the two cores); with --slurm each run is a job with --cores cores. Finished runs
+are reused and stopped ones resumed; a run that fails is reported with the end of its log, the
+others go on. Prints a markdown table per variant and round.
 """
 import argparse
 import glob
@@ -15,12 +20,16 @@ import json
 import os
 import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-import taskexp_cli as cli
-from taskexp_lib.config import Config
+BENCH = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(BENCH))              # the checkout, installed or not
+sys.path[:0] = [BENCH, ROOT]
+import engine  # noqa: E402
+
+import taskexp_cli as cli  # noqa: E402
+from taskexp_lib.config import Config  # noqa: E402
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"],
@@ -29,7 +38,7 @@ FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--
 
 
 # finished runs' results.json, copied by lab/bench/headline.py --keep and committed
-KEPT = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "results", "runs")
+KEPT = os.path.join(os.path.dirname(BENCH), "results", "runs")
 # as taskexp.py names its default directories (expand6000 and hidden64: a name of ours, where
 # taskexp.py would add a code of the setting)
 DIRS = {"no-restrict": "ours-norestrict", "no-labels": "ours-nolabels",
@@ -47,18 +56,51 @@ def run_dir(variant, seed, root):
     return os.path.join(root, f"{kept_name(variant)}-seed{seed}")
 
 
-def run_one(variant, seed, rounds, root, extra_args):
-    """Finished runs are reused, stopped ones resumed (same results as if never stopped)."""
+def command(variant, seed, rounds, root, extra_args, workers=1):
+    """The command that makes one run, or goes on with it (--resume: the same results as if never
+    stopped); None when it is finished. workers=None: as many as the job's cores."""
     out = run_dir(variant, seed, root)
     done = cli.saved_round(out)
-    if done < rounds:
-        cmd = [sys.executable, "-m", "taskexp_cli", "--rounds", str(rounds), "--out", out,
-               "--workers", "1"]
-        cmd += ["--resume"] if done >= 0 else ["--seed", str(seed), *FLAGS[variant], *extra_args]
-        with open(out + ".log", "a" if done >= 0 else "w") as log:
+    if done >= rounds:
+        return None
+    cmd = [sys.executable, os.path.join(ROOT, "taskexp.py"), "--rounds", str(rounds), "--out", out]
+    cmd += [] if workers is None else ["--workers", str(workers)]
+    return cmd + (["--resume"] if done >= 0 else ["--seed", str(seed), *FLAGS[variant],
+                                                   *extra_args])
+
+
+def results_of(variant, seed, root):
+    with open(os.path.join(run_dir(variant, seed, root), "results.json")) as f:
+        return json.load(f)
+
+
+def run_one(variant, seed, rounds, root, extra_args):
+    """One run in this process's thread (lab/bench/reproduce.py): made, resumed or reused."""
+    cmd = command(variant, seed, rounds, root, extra_args)
+    if cmd:
+        with open(run_dir(variant, seed, root) + ".log", "a" if "--resume" in cmd else "w") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
-    with open(os.path.join(out, "results.json")) as f:
-        return variant, seed, json.load(f)
+    return variant, seed, results_of(variant, seed, root)
+
+
+def run_many(pairs, rounds, root, extra_args, jobs=2, slurm=None, cores=2):
+    """Every (variant, seed) run through the engine: the unfinished ones made or resumed, at most
+    `jobs` at a time. -> ({(variant, seed): results} of the finished runs, {run: end of its log}
+    of the failed ones)."""
+    runs = {}
+    for variant, seed in pairs:
+        cmd = command(variant, seed, rounds, root, extra_args, None if slurm else 1)
+        log = run_dir(variant, seed, root) + ".log"
+        if cmd and "--resume" not in cmd and os.path.exists(log):
+            os.remove(log)                                      # a new run, a new log
+        if cmd:
+            runs[os.path.basename(run_dir(variant, seed, root))] = cmd, log
+    print(f"{len(pairs) - len(runs)} of {len(pairs)} runs finished already; {len(runs)} to go")
+    failed = engine.run_all(runs, os.path.join(root, ".submitit"), jobs, slurm,
+                            cores if slurm else 1)
+    done = {(v, s): results_of(v, s, root) for v, s in pairs
+            if os.path.basename(run_dir(v, s, root)) not in failed}
+    return done, failed
 
 
 def load(name, kept=KEPT):
@@ -74,23 +116,37 @@ def load(name, kept=KEPT):
     return sorted(runs, key=lambda r: r["config"]["seed"])
 
 
+def split_argv(argv):
+    """This script's flags, and those after `--`, which go to every new run's taskexp.py."""
+    if "--" not in argv:
+        return argv, []
+    return argv[:argv.index("--")], argv[argv.index("--") + 1:]
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     p.add_argument("--variants", nargs="+", choices=list(FLAGS), default=["ours"])
     p.add_argument("--rounds", type=int, default=3)
     p.add_argument("--root", default="runs")
-    p.add_argument("--jobs", type=int, default=2)
+    p.add_argument("--jobs", type=int, default=2, help="runs at a time (default 2)")
     p.add_argument("--scale", default=None, help="passed to taskexp.py (smaller budgets)")
-    a = p.parse_args()
-    os.makedirs(a.root, exist_ok=True)
-    extra_args = ["--scale", a.scale] if a.scale else []
-    jobs = [(v, s) for v in a.variants for s in a.seeds]
-    with ThreadPoolExecutor(a.jobs) as pool:
-        done = list(pool.map(lambda vs: run_one(*vs, a.rounds, a.root, extra_args), jobs))
+    p.add_argument("--slurm", metavar="PARTITION", help="run each as a job on this SLURM partition "
+                   "(default: processes on this machine)")
+    p.add_argument("--cores", type=int, default=2, help="with --slurm: cores per run (default 2)")
+    ours, theirs = split_argv(sys.argv[1:])
+    a = p.parse_args(ours)
+    root = os.path.abspath(a.root)              # the jobs may start in another folder
+    os.makedirs(root, exist_ok=True)
+    extra_args = (["--scale", a.scale] if a.scale else []) + theirs
+    pairs = [(v, s) for v in a.variants for s in a.seeds]
+    done, failed = run_many(pairs, a.rounds, root, extra_args, a.jobs, a.slurm, a.cores)
     summary = []
     for variant in a.variants:
-        res = [r for v, _, r in done if v == variant]
+        res = [done[v, s] for v, s in pairs if v == variant and (v, s) in done]
+        if len(res) < len(a.seeds):
+            print(f"\n{variant}: {len(a.seeds) - len(res)} of its runs failed; no table")
+            continue
         shapes = list(res[0]["rounds"][0]["eval"])
         print(f"\n{variant}: zero-shot success, mean +- std over seeds {a.seeds}")
         print("| round | " + " | ".join(shapes) + " | wall-clock (s) |")
@@ -118,12 +174,15 @@ def main():
     print("| variant | success |\n|---|---|")
     for variant, cell in summary:
         print(f"| {variant} | {cell} |")
+    if failed:
+        sys.exit(f"{len(failed)} run(s) failed: {', '.join(failed)} (their logs: {root}/)")
 
 
 def pm(values, unit="", digits=0):
     """mean +- std of values, as text."""
     v = np.asarray(values, float)
     return f"{v.mean():.{digits}f} +- {v.std():.{digits}f}{unit}"
+
 
 if __name__ == "__main__":
     main()
