@@ -3,16 +3,17 @@ skip), run as an instructor would, on the course that `python -m course course`
 writes.
 
     nbgrader generate_assignment taskexp     on the instructor notebooks (source/taskexp/)
-    nbgrader autograde taskexp               on three submissions, copies of release/taskexp/:
+    nbgrader autograde taskexp               on two submissions, copies of release/taskexp/:
         reference   every solution cell pasted from the instructor notebooks: 19/19, ex7 included
-        blank       the release as it is: 0/19
-        wrong       the reference with select_goal = argmax V(s_T, g) (end2new, equation 1 without
-                    its first term) and ex1 left as released: loses ex6's points and ex1's, and
-                    ex7's (which first names ex1 as not done, so it does not train), nothing else
+        mixed       ex2 and ex4 solved; ex1, ex3, ex5 and ex8 left as released (blank); ex6 with
+                    select_goal = argmax V(s_T, g) (end2new, equation 1 without its first term);
+                    ex7, which first names ex1 as not done, so it does not train: 5/19, the
+                    points of ex2 and ex4 and nothing else
 
 nbclient, which tests/test_exercises.py uses, executes notebooks but does not grade: nbgrader
 gives 0 points to a graded cell that writes to stderr, stops a cell after its timeout, and grades
-in the student's folder. About three minutes on two cores: 24 kernels, ex7 trains once.
+in the student's folder. About a minute on two cores: 16 kernels, ex7 trains once. (A blank
+release scoring 0/19 is checked without nbgrader too, by tests/test_kit.py.)
 """
 import json
 import os
@@ -29,6 +30,7 @@ import course.kit as kit
 
 POINTS = exercises.POINTS
 WRONG = ("return int(np.argmax(v_T - v_0))", "return int(np.argmax(v_T))")      # in ex6
+BLANK = ("ex1", "ex3", "ex5", "ex8")                   # left as released by the mixed submission
 
 
 def nbgrader_cmd(root, *args):
@@ -46,20 +48,20 @@ def course(tmp_path_factory):
     kit.course(str(root))
     nbgrader_cmd(root, "generate_assignment", "taskexp")
     release = root / "release" / "taskexp"
-    for student in ("reference", "blank", "wrong"):
+    for student in ("reference", "mixed"):
         shutil.copytree(release, root / "submitted" / student / "taskexp")
-    for student in ("reference", "wrong"):
         kit.paste_solutions(root / "submitted" / student / "taskexp")
-    ex6 = root / "submitted" / "wrong" / "taskexp" / exercises.NOTEBOOKS["ex6"]
+    mixed = root / "submitted" / "mixed" / "taskexp"
+    ex6 = mixed / exercises.NOTEBOOKS["ex6"]
     text = ex6.read_text()
     assert text.count(WRONG[0]) == 1
     ex6.write_text(text.replace(WRONG[0], WRONG[1]))
-    ex1 = exercises.NOTEBOOKS["ex1"]                   # unfinished: ex7 stops without training
-    shutil.copy(release / ex1, root / "submitted" / "wrong" / "taskexp" / ex1)
+    for ex in BLANK:                                   # ex1 unfinished: ex7 stops without training
+        shutil.copy(release / exercises.NOTEBOOKS[ex], mixed / exercises.NOTEBOOKS[ex])
     nbgrader_cmd(root, "autograde", "taskexp")
     scores = {}
     with Gradebook(f"sqlite:///{root / 'gradebook.db'}") as gb:
-        for student in ("reference", "blank", "wrong"):
+        for student in ("reference", "mixed"):
             sub = gb.find_submission("taskexp", student)
             assert sub.max_score == sum(POINTS.values()) == 19
             scores[student] = {nb.name[:3]: nb.score for nb in sub.notebooks}
@@ -70,12 +72,13 @@ def test_reference_solutions_get_full_marks(course):
     assert course[1]["reference"] == POINTS
 
 
-def test_blank_release_gets_nothing(course):
-    assert course[1]["blank"] == {ex: 0 for ex in POINTS}
+def test_blank_exercises_get_nothing(course):
+    left = (*BLANK, "ex7")                             # ex7 needs ex1, which is left blank
+    assert {ex: course[1]["mixed"][ex] for ex in left} == {ex: 0 for ex in left}
 
 
 def test_a_wrong_answer_loses_exactly_its_exercise(course):
-    assert course[1]["wrong"] == {**POINTS, "ex1": 0, "ex6": 0, "ex7": 0}
+    assert course[1]["mixed"] == {ex: POINTS[ex] if ex in ("ex2", "ex4") else 0 for ex in POINTS}
 
 
 def graded_outputs(path):
@@ -90,14 +93,13 @@ def test_graded_cells_write_nothing_to_stderr_and_fail_with_a_message(course):
         outputs = graded_outputs(root / "autograded" / "reference" / "taskexp" / name)
         assert outputs and not [o for o in outputs if o.get("name") == "stderr"
                                 or o["output_type"] == "error"], (name, outputs)
-    errors = [o for o in graded_outputs(root / "autograded" / "wrong" / "taskexp" /
+    errors = [o for o in graded_outputs(root / "autograded" / "mixed" / "taskexp" /
                                         exercises.NOTEBOOKS["ex6"]) if o["output_type"] == "error"]
     assert errors[0]["ename"] == "AssertionError"
     assert errors[0]["evalue"].startswith("ex6 FAIL: case 'select_goal") and \
         "end2new" in errors[0]["evalue"], errors[0]["evalue"]
-    for student in ("blank", "wrong"):
-        ex7 = graded_outputs(root / "autograded" / student / "taskexp" / exercises.NOTEBOOKS["ex7"])
-        assert "not done yet" in ex7[-1]["evalue"] and "ex1" in ex7[-1]["evalue"], ex7
+    ex7 = graded_outputs(root / "autograded" / "mixed" / "taskexp" / exercises.NOTEBOOKS["ex7"])
+    assert "not done yet" in ex7[-1]["evalue"] and "ex1" in ex7[-1]["evalue"], ex7
 
 
 def test_nbgrader_release_is_the_student_kit(course, tmp_path):

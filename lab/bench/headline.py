@@ -45,7 +45,8 @@ def keep(run_dirs, kept=KEPT, tasks=600):
             raise SystemExit(f"{out}: not finished ({len(results['rounds']) - 1} of "
                              f"{results['config']['rounds']} rounds)")
         results.update(feasible=reproduce.feasibility(out, results["config"], tasks),
-                       build_order=reproduce.first_moves(out, results["config"]["rounds"]),
+                       build_order=reproduce.first_moves(out, results["config"]["rounds"],
+                                                         results["config"]["eval_episodes"]),
                        machine=reproduce.machine())
         path = os.path.join(kept, os.path.basename(os.path.normpath(out)) + ".json")
         with open(path, "w") as f:

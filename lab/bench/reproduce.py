@@ -90,10 +90,11 @@ def feasibility(out, cfg, tasks):
         return json.load(f)
 
 
-def first_moves(out, rounds, episodes=100):
+def first_moves(out, rounds, episodes):
     """The actor's leading indicator (lab/bench/build_order.py) on each round's checkpoint of the
-    run in `out` -> {round: {shape: {"first_move": {kind: share}, ...}}}. Kept in the run's folder
-    as feasibility is."""
+    run in `out`, on its first `episodes` evaluation scenes per shape (the run's eval_episodes)
+    -> {round: {shape: {"first_move": {kind: share}, ...}}}. Kept in the run's folder as
+    feasibility is."""
     path = os.path.join(out, "build_order.json")
     if not os.path.exists(path):
         script = os.path.join(os.path.dirname(os.path.abspath(__file__)), "build_order.py")
@@ -285,7 +286,8 @@ def main():
         if v == "ours":                   # the leading indicators: the critic's, the actor's
             results["feasible"] = feasibility(run_dir(v, s, root), results["config"],
                                               max(50, int(600 * float(a.scale or 1))))
-            results["build_order"] = first_moves(run_dir(v, s, root), rounds_of(v))
+            results["build_order"] = first_moves(run_dir(v, s, root), rounds_of(v),
+                                                 results["config"]["eval_episodes"])
         return job, results
 
     if a.kept:
