@@ -127,6 +127,10 @@ class Config:
     buffer_size: int = 60000
     """sec 4.3: demo steps, and tasks, kept for self-distillation (oldest dropped): the memory
     bound of a long run"""
+    distill_data: str = "buffer"
+    """sec 4.3: what a round's BC learns from: buffer (the new demos' steps and every kept one)
+    | balanced (the new steps and as many drawn from the kept ones, as the authors'
+    distillation keeps "some original successful data"; lab/notes.md)"""
 
     eval_episodes: int = 100
     """sec 5: fixed evaluation scenes per shape, the same after every round"""
@@ -140,7 +144,8 @@ class Config:
 
 # Fields added since runs were first kept, each with the value that does what the code before it
 # did: a run saved without the field resumes with that value
-ADDED = {"other_orders": False}                                # 2026-12-04
+ADDED = {"other_orders": False,                                # 2026-12-04
+         "distill_data": "buffer"}                             # 2026-12-06
 # Fields removed since, each with the only value today's code can go on with: they served variants
 # whose findings are in lab/notes.md (hard_picks, label_later_*: measured at main f915fea)
 REMOVED = {"hard_picks": False, "label_later_tasks": 0, "label_later_epochs": None,

@@ -3,7 +3,8 @@ writes RESULTS.md with every table and the targets, and the figures it links to;
 headline is what the runs kept in lab/results/runs/ say (lab/bench/headline.py);
 lab/bench/bench_speed.py times every phase of a run and counts the operations of its matrix
 products; lab/bench/value_fit.py replays a run's value fits; lab/bench/run_seeds.py hands its runs
-to an engine (lab/bench/engine.py, submitit)."""
+to an engine (lab/bench/engine.py, submitit); lab/bench/branch.py goes on from a run's round 0
+under other settings of the later rounds."""
 import json
 import os
 import re
@@ -11,11 +12,13 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BENCH = os.path.join(ROOT, "lab", "bench")
 sys.path.insert(0, BENCH)
 import bench_speed  # noqa: E402
+import branch  # noqa: E402
 import engine  # noqa: E402
 import headline  # noqa: E402
 import value_fit  # noqa: E402
@@ -233,3 +236,25 @@ def test_engine_reports_a_failed_run_with_its_log_and_finishes_the_others(tmp_pa
     assert failed == {"bad": "went wrong here\n"}
     assert "finished good" in said and any(s.startswith("FAILED bad") for s in said), said
     assert (tmp_path / "good.log").read_text() == "fine\n"
+
+
+def test_a_branch_of_round_0_gives_the_bytes_of_a_run_made_with_its_settings(tmp_path):
+    """Round 0 reads none of branch.LATER: a round-0 run, branched with other settings of the
+    later rounds and resumed, gives the round-1 checkpoint of a run made with them throughout.
+    A setting that round 0 reads is refused."""
+    tiny = ["--scale", "0.02", "--label-epochs", "6"]
+    later = {"distill_data": "balanced", "other_orders": False, "buffer_size": 1000}
+    flags = ["--distill-data", "balanced", "--no-other-orders", "--buffer-size", "1000"]
+    cli.main(["--rounds", "0", *tiny, "--out", str(tmp_path / "base")])
+    branch.branch(str(tmp_path / "base"), str(tmp_path / "branch"), later)
+    cli.main(["--resume", "--rounds", "1", "--out", str(tmp_path / "branch")])
+    cli.main(["--rounds", "1", *tiny, *flags, "--out", str(tmp_path / "direct")])
+    for name in ("round0.npz", "round1.npz"):
+        branched, direct = (tmp_path / d / name for d in ("branch", "direct"))
+        assert branched.read_bytes() == direct.read_bytes(), name
+    made = json.loads((tmp_path / "branch" / "results.json").read_text())
+    assert made["branched_from"]["changes"] == later
+    with pytest.raises(SystemExit, match="--p-add: round 0 reads it"):
+        branch.branch(str(tmp_path / "base"), str(tmp_path / "other"), {"p_add": 0.7})
+    with pytest.raises(SystemExit, match="branch a run made with --rounds 0"):
+        branch.branch(str(tmp_path / "direct"), str(tmp_path / "other"), later)

@@ -43,7 +43,7 @@ def child(*argv):
 # ----------------------------------------------------------------------------- the CLI
 
 @pytest.mark.parametrize("argv, reason", [
-    (["--rounds", "0"], "--rounds must be >= 1"),
+    (["--rounds", "-1"], "--rounds must be >= 0"),
     (["--select", "best"], "invalid choice"),
     (["--scale", "-1"], "--scale must be in"),
     (["--blocks", "5"], "--blocks must be in 6..8"),

@@ -74,11 +74,20 @@ def results_of(variant, seed, root):
         return json.load(f)
 
 
+def fresh_log(cmd, variant, seed, root):
+    """The log file of a run that `cmd` makes or resumes: a new run starts a new log (the old
+    one removed), a resumed one appends to its own."""
+    log = run_dir(variant, seed, root) + ".log"
+    if "--resume" not in cmd and os.path.exists(log):
+        os.remove(log)
+    return log
+
+
 def run_one(variant, seed, rounds, root, extra_args):
     """One run in this process's thread (lab/bench/reproduce.py): made, resumed or reused."""
     cmd = command(variant, seed, rounds, root, extra_args)
     if cmd:
-        with open(run_dir(variant, seed, root) + ".log", "a" if "--resume" in cmd else "w") as log:
+        with open(fresh_log(cmd, variant, seed, root), "a") as log:
             subprocess.run(cmd, check=True, stdout=log, stderr=subprocess.STDOUT)
     return variant, seed, results_of(variant, seed, root)
 
@@ -90,11 +99,9 @@ def run_many(pairs, rounds, root, extra_args, jobs=2, slurm=None, cores=2):
     runs = {}
     for variant, seed in pairs:
         cmd = command(variant, seed, rounds, root, extra_args, None if slurm else 1)
-        log = run_dir(variant, seed, root) + ".log"
-        if cmd and "--resume" not in cmd and os.path.exists(log):
-            os.remove(log)                                      # a new run, a new log
         if cmd:
-            runs[os.path.basename(run_dir(variant, seed, root))] = cmd, log
+            runs[os.path.basename(run_dir(variant, seed, root))] = cmd, fresh_log(
+                cmd, variant, seed, root)
     print(f"{len(pairs) - len(runs)} of {len(pairs)} runs finished already; {len(runs)} to go")
     failed = engine.run_all(runs, os.path.join(root, ".submitit"), jobs, slurm,
                             cores if slurm else 1)
