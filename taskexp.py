@@ -370,16 +370,11 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
     as many old ones. The buffer and the task list keep the newest cfg.buffer_size entries (the
     memory bound of a long run). Updates `run`; returns the round's BC losses and PPO success."""
     new_obs, new_act = demo_arrays(with_other_orders(demos))
-    if cfg.distill_data == "balanced":          # the new steps, and as many of the kept ones
-        kept = rng.integers(len(run.buffer_act), size=len(new_act))
-        bc_obs = np.concatenate([new_obs, run.buffer_obs[kept]])
-        bc_act = np.concatenate([new_act, run.buffer_act[kept]])
     run.buffer_obs = np.concatenate([run.buffer_obs, new_obs])[-cfg.buffer_size:]
     run.buffer_act = np.concatenate([run.buffer_act, new_act])[-cfg.buffer_size:]
-    if cfg.distill_data == "buffer":
-        bc_obs, bc_act = run.buffer_obs, run.buffer_act
-    bc_loss = agent.bc(bc_obs, bc_act, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng, bar=bar)
-    log(f"  BC on {len(bc_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
+    bc_loss = agent.bc(run.buffer_obs, run.buffer_act, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng,
+                       bar=bar)
+    log(f"  BC on {len(run.buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
     new_tasks = [(d.states[0].copy(), d.goals) for d in demos]    # a copy: not the whole episode
     old = [run.all_tasks[i] for i in rng.integers(len(run.all_tasks), size=len(new_tasks))]
     ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short_envs, rng, "PPO distil",

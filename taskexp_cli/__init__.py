@@ -38,7 +38,6 @@ from . import report
 # --------------------------------------------------------------------------------------------
 
 CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",),
-           "distill_data": ("buffer", "balanced"),
            "shapes": tuple(SHAPES), "dtype": ("float32", "float64"),
            "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place")}
 MIN_ZERO = {"seed", "rounds", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add",

@@ -88,8 +88,9 @@ class Config:
     gae_lambda: float = 0.95
     """GAE lambda"""
 
-    expand_episodes: int = 3000
-    """sec 4.2: attempts on the previous round's tasks per round"""
+    expand_episodes: int = 6000
+    """sec 4.2: attempts on the previous round's tasks per round; twice the 3000 of 2026-12-05,
+    which generated half as many tall tasks and less zero-shot success every round (lab/notes.md)"""
     candidates: int = 64
     """sec 4.2: K, the one-alteration candidates drawn per successful trajectory"""
     p_add: float = 0.5
@@ -127,10 +128,6 @@ class Config:
     buffer_size: int = 60000
     """sec 4.3: demo steps, and tasks, kept for self-distillation (oldest dropped): the memory
     bound of a long run"""
-    distill_data: str = "buffer"
-    """sec 4.3: what a round's BC learns from: buffer (the new demos' steps and every kept one)
-    | balanced (the new steps and as many drawn from the kept ones, as the authors'
-    distillation keeps "some original successful data"; lab/notes.md)"""
 
     eval_episodes: int = 100
     """sec 5: fixed evaluation scenes per shape, the same after every round"""
@@ -144,12 +141,12 @@ class Config:
 
 # Fields added since runs were first kept, each with the value that does what the code before it
 # did: a run saved without the field resumes with that value
-ADDED = {"other_orders": False,                                # 2026-12-04
-         "distill_data": "buffer"}                             # 2026-12-06
+ADDED = {"other_orders": False}                                # 2026-12-04
 # Fields removed since, each with the only value today's code can go on with: they served variants
-# whose findings are in lab/notes.md (hard_picks, label_later_*: measured at main f915fea)
+# whose findings are in lab/notes.md (hard_picks, label_later_*: measured at main f915fea;
+# distill_data: at ba5e9fb)
 REMOVED = {"hard_picks": False, "label_later_tasks": 0, "label_later_epochs": None,
-           "label_every_round": False}
+           "label_every_round": False, "distill_data": "buffer"}
 
 
 class RemovedSetting(ValueError):

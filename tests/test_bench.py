@@ -243,8 +243,8 @@ def test_a_branch_of_round_0_gives_the_bytes_of_a_run_made_with_its_settings(tmp
     later rounds and resumed, gives the round-1 checkpoint of a run made with them throughout.
     A setting that round 0 reads is refused."""
     tiny = ["--scale", "0.02", "--label-epochs", "6"]
-    later = {"distill_data": "balanced", "other_orders": False, "buffer_size": 1000}
-    flags = ["--distill-data", "balanced", "--no-other-orders", "--buffer-size", "1000"]
+    later = {"other_orders": False, "buffer_size": 1000}
+    flags = ["--no-other-orders", "--buffer-size", "1000"]
     cli.main(["--rounds", "0", *tiny, "--out", str(tmp_path / "base")])
     branch.branch(str(tmp_path / "base"), str(tmp_path / "branch"), later)
     cli.main(["--resume", "--rounds", "1", "--out", str(tmp_path / "branch")])
@@ -253,8 +253,12 @@ def test_a_branch_of_round_0_gives_the_bytes_of_a_run_made_with_its_settings(tmp
         branched, direct = (tmp_path / d / name for d in ("branch", "direct"))
         assert branched.read_bytes() == direct.read_bytes(), name
     made = json.loads((tmp_path / "branch" / "results.json").read_text())
-    assert made["branched_from"]["changes"] == later
+    assert made["branched_from"] == dict(run=str(tmp_path / "base"), changes=later,
+                                         ablation=False)
     with pytest.raises(SystemExit, match="--p-add: round 0 reads it"):
-        branch.branch(str(tmp_path / "base"), str(tmp_path / "other"), {"p_add": 0.7})
+        branch.branch(str(tmp_path / "base"), str(tmp_path / "other"), {"p_add": 0.7}, True)
+    with pytest.raises(SystemExit, match="--select: round 0 reads it"):
+        branch.branch(str(tmp_path / "base"), str(tmp_path / "other"), {"select": "end2new"})
+    branch.branch(str(tmp_path / "base"), str(tmp_path / "end2new"), {"select": "end2new"}, True)
     with pytest.raises(SystemExit, match="branch a run made with --rounds 0"):
         branch.branch(str(tmp_path / "direct"), str(tmp_path / "other"), later)

@@ -5,8 +5,8 @@ settings of task expansion and self-distillation (LATER). A lever among those is
 from one round-0 run per seed, branched once per setting:
 
     python taskexp.py --rounds 0 --seed 0 --out runs/base-seed0              # once per seed
-    python lab/bench/branch.py runs/base-seed0 runs/balanced-seed0 --distill-data balanced
-    python taskexp.py --resume --out runs/balanced-seed0 --rounds 2
+    python lab/bench/branch.py runs/base-seed0 runs/expand-seed0 --expand-episodes 9000
+    python taskexp.py --resume --out runs/expand-seed0 --rounds 2
 
 The branch's results are the bytes a run made with those settings from the start would give
 (tests/test_bench.py); its results.json names the run it came from (branched_from).
@@ -27,16 +27,24 @@ from taskexp_lib.config import Config, saved_config  # noqa: E402
 
 # the settings that only rounds >= 1 read (round 0's labels and stretch tasks read p_add,
 # candidates, restrict and select, so those are not among them)
-LATER = ("rounds", "expand_episodes", "other_orders", "buffer_size", "distill_data", "baseline")
+LATER = ("rounds", "expand_episodes", "other_orders", "buffer_size", "baseline")
+# Table 3's rules, which an ablation (--ablation) applies from round 1 on: all rows then share
+# one base policy and round-0 critic, so that the table compares goal selection alone. Such a
+# branch is not the run made with the rule from the start, whose round-0 labels would already
+# rank candidates by it.
+ABLATIONS = ("select", "restrict")
 
 
-def branch(source, out, changes):
+def branch(source, out, changes, ablation=False):
     """Write into `out` the run in `source` after its round 0, with the settings `changes`
-    ({Config field: value}, fields of LATER only). SystemExit with a one-line reason otherwise."""
-    wrong = sorted(set(changes) - set(LATER))
+    ({Config field: value}: fields of LATER, and of ABLATIONS if `ablation`). SystemExit with a
+    one-line reason otherwise."""
+    allowed = LATER + (ABLATIONS if ablation else ())
+    wrong = sorted(set(changes) - set(allowed))
     if wrong:
         raise SystemExit(f"{cli.flag(wrong[0])}: round 0 reads it, so a branch of round 0 cannot "
-                         f"change it; a branch changes {', '.join(map(cli.flag, LATER))}")
+                         f"change it; a branch changes {', '.join(map(cli.flag, allowed))}"
+                         + ("" if ablation else " (and, with --ablation, Table 3's rules)"))
     results, why = saved_results(source)
     if results is None:
         raise SystemExit(f"{source}: no run to branch ({why})")
@@ -51,7 +59,8 @@ def branch(source, out, changes):
                               taskexp.make_agent(cfg))
     run = taskexp.RunState(**saved)
     run.results["config"] = asdict(replace(cfg, **changes))
-    run.results["branched_from"] = dict(run=os.path.abspath(source), changes=changes)
+    run.results["branched_from"] = dict(run=os.path.abspath(source), changes=changes,
+                                        ablation=ablation)
     os.makedirs(out)
     shutil.copy(os.path.join(source, "round0.npz"), out)
     save_state(os.path.join(out, "state.npz"), agent, run, rng)
@@ -64,11 +73,13 @@ def main():
                                 " ".join(map(cli.flag, LATER)))
     p.add_argument("source", help="a run made with --rounds 0")
     p.add_argument("out", help="the new run's directory")
+    p.add_argument("--ablation", action="store_true",
+                   help="allow Table 3's rules (--select, --no-restrict), applied from round 1 on")
     a, flags = p.parse_known_args()
     given = cli.parser().parse_args(flags)
     changes = {f.name: getattr(given, f.name) for f in fields(Config)
                if getattr(given, f.name) is not None}
-    branch(a.source, a.out, changes)
+    branch(a.source, a.out, changes, a.ablation)
     print(f"wrote {a.out}; go on with:\n    python taskexp.py --resume --out {a.out} "
           f"--rounds {max(changes.get('rounds', 1), 1)}")
 
