@@ -36,7 +36,7 @@ def test_reproduce_writes_the_report(tmp_path):
                     "1", "--features", "plain", "--variants", "ours", "direct-ppo", "no-restrict",
                     "--rounds", "2", "--direct-rounds", "1", "--scale", "0.02", "--root",
                     str(tmp_path / "runs"), "--out", str(out), "--figures", str(figs),
-                    "--", "--label-epochs", "6"],                # fewer value-fit epochs
+                    "--", "--label-epochs", "6", "--expand-episodes", "3000"],   # quicker
                    check=True, cwd=tmp_path,
                    capture_output=True)
     text = out.read_text()
@@ -209,13 +209,14 @@ def test_engine_runs_the_seeds_as_direct_runs_do_and_reuses_them(tmp_path):
     seeds) give the bytes of the same runs made directly, and a second call starts none."""
     root = tmp_path / "runs"
     seeds = [sys.executable, os.path.join(BENCH, "run_seeds.py"), "--seeds", "0", "1",
-             "--rounds", "1", "--scale", "0.02", "--root", str(root), "--", "--label-epochs", "6"]
+             "--rounds", "1", "--scale", "0.02", "--root", str(root), "--", "--label-epochs", "6",
+             "--expand-episodes", "3000"]
     first = subprocess.run(seeds, check=True, capture_output=True, text=True, cwd=tmp_path)
     assert "0 of 2 runs finished already; 2 to go" in first.stdout, first.stdout
     for seed in (0, 1):
         direct = tmp_path / f"direct{seed}"
         cli.main(["--rounds", "1", "--scale", "0.02", "--seed", str(seed), "--label-epochs", "6",
-                  "--out", str(direct)])
+                  "--expand-episodes", "3000", "--out", str(direct)])
         made = root / f"ours-seed{seed}"
         for name in ("round0.npz", "round1.npz"):
             assert (made / name).read_bytes() == (direct / name).read_bytes(), (seed, name)
@@ -242,7 +243,7 @@ def test_a_branch_of_round_0_gives_the_bytes_of_a_run_made_with_its_settings(tmp
     """Round 0 reads none of branch.LATER: a round-0 run, branched with other settings of the
     later rounds and resumed, gives the round-1 checkpoint of a run made with them throughout.
     A setting that round 0 reads is refused."""
-    tiny = ["--scale", "0.02", "--label-epochs", "6"]
+    tiny = ["--scale", "0.02", "--label-epochs", "6", "--expand-episodes", "3000"]
     later = {"other_orders": False, "buffer_size": 1000}
     flags = ["--no-other-orders", "--buffer-size", "1000"]
     cli.main(["--rounds", "0", *tiny, "--out", str(tmp_path / "base")])

@@ -21,9 +21,9 @@ from agent import Agent
 from taskexp_lib import checkpoint
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-# budgets x 0.02, and fewer value-fit epochs (a third of a tiny run's time): what these tests check
-# (refusals, resume, workers, memory) does not depend on how well V(s, g) is fitted
-TINY = ["--scale", "0.02", "--label-epochs", "6"]
+# budgets x 0.02, fewer value-fit epochs (a third of a tiny run's time) and half the expansion
+# attempts: what these tests check (refusals, resume, workers, memory) does not depend on them
+TINY = ["--scale", "0.02", "--label-epochs", "6", "--expand-episodes", "3000"]
 PPO = dict(epochs=1, minibatch=16, clip=0.2, ent_coef=0.0, vf_coef=0.5, lr=1e-3, max_grad_norm=0.5)
 
 

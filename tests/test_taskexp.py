@@ -119,8 +119,9 @@ def test_shapes_are_held_out_and_buildable(env, name):
 
 def run_cli(tmp_path, *extra):
     out = str(tmp_path / "run")
-    # budgets x 0.02 and fewer value-fit epochs (a third of a tiny run's time): the plumbing
-    cli.main(["--rounds", "1", "--scale", "0.02", "--label-epochs", "6", "--out", out, *extra])
+    # budgets x 0.02, fewer value-fit epochs and expansion attempts: the plumbing
+    cli.main(["--rounds", "1", "--scale", "0.02", "--label-epochs", "6",
+              "--expand-episodes", "3000", "--out", out, *extra])
     with open(os.path.join(out, "results.json")) as f:
         return out, json.load(f)
 
@@ -149,7 +150,7 @@ def test_every_phase_of_a_run_shows_progress(tmp_path):
         asked.append(desc)
         return tqdm(total=total, disable=True)
     cfg = cli.parse_args(["--rounds", "1", "--scale", "0.02", "--label-epochs", "6",
-                          "--out", "unused"]).cfg
+                          "--expand-episodes", "3000", "--out", "unused"]).cfg
     cli.run(cfg, str(tmp_path / "run"), log=lambda *a: None, bar=bar)
     phases = {"demos", "BC", "PPO base", "collect 1", "rank 1", "label 1", "value fit",
               "pair value fit", "collect", "eq. (1)", "verify", "other orders", "PPO distil",
