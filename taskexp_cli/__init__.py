@@ -197,6 +197,14 @@ def usable_cores():
         return os.cpu_count() or 1
 
 
+def given_settings(a):
+    """{Config field: value} of the flags given on a command line that parser() parsed into `a`."""
+    given = {f.name: getattr(a, f.name) for f in fields(Config) if getattr(a, f.name) is not None}
+    if "shapes" in given:
+        given["shapes"] = tuple(given["shapes"])
+    return given
+
+
 def parse_args(argv=None):
     """-> Invocation. Bad settings: a one-line reason, exit 2."""
     p = parser()
@@ -204,9 +212,7 @@ def parse_args(argv=None):
     if a.workers is not None and a.workers < 1:
         p.error(f"--workers must be >= 1, got {a.workers}")
     workers = usable_cores() if a.workers is None else a.workers
-    given = {f.name: getattr(a, f.name) for f in fields(Config) if getattr(a, f.name) is not None}
-    if "shapes" in given:
-        given["shapes"] = tuple(given["shapes"])
+    given = given_settings(a)
     if a.out is not None and os.path.isfile(a.out):
         p.error(f"--out {a.out} is a file; name a directory for the run")
     if a.resume:

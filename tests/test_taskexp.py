@@ -181,16 +181,18 @@ def test_top_candidates_follow_equation_1_and_outcomes_are_discounted():
     assert not labels.discounted_outcome(three, 0.9).any()
 
 
-def test_labelled_outcomes_for_v_are_recorded(tmp_path):
+def test_labelled_outcomes_for_v_are_recorded_and_reproducible(tmp_path):
     """On by default, once, after the base PPO (round 0), and not before the later expansions;
-    --scale shrinks them; 0 is off. (That they reproduce, test_same_seed_same_results... shows:
-    its runs label.)"""
-    _, run = run_cli(tmp_path / "on", "--label-iters", "2", "--label-epochs", "2")
-    config, rounds = run["config"], run["rounds"]
+    --scale shrinks them; 0 is off."""
+    flags = ("--label-iters", "2", "--label-epochs", "2")
+    runs = [run_cli(tmp_path / name, *flags) for name in ("a", "b")]
+    config, rounds = runs[0][1]["config"], runs[0][1]["rounds"]
     assert config["label_tasks"] == round(0.02 * taskexp.Config().label_tasks)
     assert rounds[0]["label_runs"] > 0 and len(rounds[0]["label_loss"]) == 1
     assert 0 <= rounds[0]["label_success"] <= 1
     assert not any(k.startswith("label_") for k in rounds[1])
+    files = [open(os.path.join(out, "round1.npz"), "rb").read() for out, _ in runs]
+    assert files[0] == files[1]
     _, off = run_cli(tmp_path / "off", "--label-tasks", "0")
     assert off["config"]["label_tasks"] == 0
     assert not any(k.startswith("label_") for r in off["rounds"] for k in r)

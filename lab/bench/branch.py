@@ -15,7 +15,7 @@ import argparse
 import os
 import shutil
 import sys
-from dataclasses import asdict, fields, replace
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -23,7 +23,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."
 import taskexp  # noqa: E402
 import taskexp_cli as cli  # noqa: E402
 from taskexp_lib.checkpoint import load_state, save_json, save_state, saved_results  # noqa: E402
-from taskexp_lib.config import Config, saved_config  # noqa: E402
+from taskexp_lib.config import saved_config  # noqa: E402
 
 # the settings that only rounds >= 1 read (round 0's labels and stretch tasks read p_add,
 # candidates, restrict and select, so those are not among them)
@@ -76,9 +76,7 @@ def main():
     p.add_argument("--ablation", action="store_true",
                    help="allow Table 3's rules (--select, --no-restrict), applied from round 1 on")
     a, flags = p.parse_known_args()
-    given = cli.parser().parse_args(flags)
-    changes = {f.name: getattr(given, f.name) for f in fields(Config)
-               if getattr(given, f.name) is not None}
+    changes = cli.given_settings(cli.parser().parse_args(flags))
     branch(a.source, a.out, changes, a.ablation)
     print(f"wrote {a.out}; go on with:\n    python taskexp.py --resume --out {a.out} "
           f"--rounds {max(changes.get('rounds', 1), 1)}")
