@@ -21,7 +21,6 @@ in the package taskexp_cli. `python taskexp.py --rounds 3` runs taskexp_cli.main
 if __name__ == "__main__":
     from taskexp_cli import main
     raise SystemExit(main())
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from functools import partial
 from typing import Callable
@@ -32,26 +31,17 @@ from tqdm import tqdm
 import agent as agent_lib
 from agent import Agent
 from env2d import drop_height, physics_pool, run_worlds
-from taskexp_lib import one_blas_thread, rollout
+from taskexp_lib import one_blas_thread, phase, rollout
 from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Config, a run's settings)
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, observation, on_same_spot
+from taskexp_lib.hindsight import learnt_from, pair_parts, part_demos
 from taskexp_lib.labels import labelled
 from taskexp_lib.nn import mlp_backward
 from taskexp_lib.orders import other_orders, with_other_orders
 from taskexp_lib.rollout import Trajectory, run_episodes, success_rate
-from taskexp_lib.shapes import eval_tasks
+from taskexp_lib.shapes import eval_tasks, family_tasks
 from taskexp_lib.shards import SHARDS, read_only_map
-from taskexp_lib.stats import order_stats, task_stats
-
-
-@contextmanager
-def phase(where):
-    """Prefix a FloatingPointError raised by training (nn.check_finite) with where in the run."""
-    try:
-        yield
-    except FloatingPointError as e:
-        raise FloatingPointError(f"{where}: {e}") from None
-
+from taskexp_lib.stats import order_stats, task_stats, unnamed_moves
 
 silent = partial(tqdm, disable=True)     # the default progress bar: none (the CLI draws one)
 
@@ -210,6 +200,12 @@ def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print
     demos' tasks. Returns (the round's record, tasks, demo observations, demo actions)."""
     log(f"[round 0] base skills: {cfg.base_demos} single-block demos, BC, PPO")
     tasks, obs, actions = base_demos(cfg, envs, rng, cfg.base_demos, bar)
+    if cfg.base_pairs:                  # not in the paper: parts of two-move demos (hindsight.py)
+        move = partial(random_move, free_table=cfg.free_table)
+        parts = pair_parts(envs, rng, cfg.base_pairs, move, on_table, bar)
+        log(f"  {len(parts)} parts of {cfg.base_pairs} two-move demos move a block no goal names")
+        tasks = tasks + [(p.states[0], p.goals) for p in parts]
+        obs, actions = (np.concatenate(a) for a in zip((obs, actions), demo_arrays(parts)))
     bc_loss = agent.bc(obs, actions, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng, bar=bar)
     log(f"  BC loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
     ppo_log = ppo_phase(agent, tasks, cfg, envs, short_envs, rng, "PPO base", pieces=pieces,
@@ -309,7 +305,8 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     2. for each, draw K candidates with one alteration and pick g* by equation (1);
     3. run the policy from sT toward g*: on success the joined trajectory demonstrates s0 -> g*,
        on failure the joined trajectory is relabelled with the goal it did reach;
-    4. not in the paper: the moves of each also in another order that physics allows (orders.py).
+    4. not in the paper: the moves of each also in another order that physics allows (orders.py),
+       and cfg.goal_parts parts of its goals, each with the moves it needs (hindsight.py).
     """
     env, pieces = envs[0], pieces or Pieces()
     batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
@@ -336,11 +333,14 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     if cfg.other_orders:
         with bar(total=sum(len(d.actions) > 1 for d in demos), desc="other orders") as progress:
             other = other_orders(demos, envs, rng, progress)
+    longest = max((len(d.actions) for d in demos), default=0)           # the replay passes
+    with bar(total=longest, desc="parts") as progress:                 # none for goal_parts 0
+        parts = part_demos(demos, envs, rng, cfg.goal_parts, progress)
     # picks_reached: the share of equation (1)'s picks that the policy reaches from s_T, the
     # leading indicator of whether V(s, g) tells a reachable goal from an unreachable one
     info = dict(attempts=len(batch), successful=len(found), joined=sum(reached),
                 relabelled=len(demos) - sum(reached),
-                picks_reached=sum(reached) / max(len(found), 1), other_orders=other)
+                picks_reached=sum(reached) / max(len(found), 1), other_orders=other, parts=parts)
     return demos, info
 
 
@@ -369,13 +369,14 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
     """Sec 4.3: BC on the new demos mixed with the kept ones, then PPO on the new tasks mixed with
     as many old ones. The buffer and the task list keep the newest cfg.buffer_size entries (the
     memory bound of a long run). Updates `run`; returns the round's BC losses and PPO success."""
-    new_obs, new_act = demo_arrays(with_other_orders(demos))
+    new_obs, new_act = demo_arrays(learnt_from(demos))
     run.buffer_obs = np.concatenate([run.buffer_obs, new_obs])[-cfg.buffer_size:]
     run.buffer_act = np.concatenate([run.buffer_act, new_act])[-cfg.buffer_size:]
     bc_loss = agent.bc(run.buffer_obs, run.buffer_act, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng,
                        bar=bar)
     log(f"  BC on {len(run.buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
-    new_tasks = [(d.states[0].copy(), d.goals) for d in demos]    # a copy: not the whole episode
+    task = lambda d: (d.states[0].copy(), d.goals)                # a copy: not the whole episode
+    new_tasks = [task(t) for d in demos for t in (d, *d.parts)]
     old = [run.all_tasks[i] for i in rng.integers(len(run.all_tasks), size=len(new_tasks))]
     ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short_envs, rng, "PPO distil",
                         pieces=pieces, bar=bar)
@@ -388,9 +389,9 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
 # sec 5: zero-shot evaluation on held-out shapes, and the direct-PPO baseline
 # --------------------------------------------------------------------------------------------
 
-def evaluate(agent, tasks_by_shape, envs, bar=silent):
+def evaluate(agent, tasks_by_shape, envs, bar=silent, desc="zero-shot"):
     """Zero-shot success per shape with the greedy policy: {shape: rate}."""
-    with bar(total=sum(map(len, tasks_by_shape.values())), desc="zero-shot") as progress:
+    with bar(total=sum(map(len, tasks_by_shape.values())), desc=desc) as progress:
         return {name: success_rate(run_episodes(agent, tasks, envs, deterministic=True,
                                                 bar=progress))
                 for name, tasks in tasks_by_shape.items()}
@@ -430,7 +431,8 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
     record = {}
     demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces, bar)
     stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
-    stats.update(order_stats(with_other_orders(demos)))
+    stats.update(order_stats(with_other_orders(demos)), unnamed_moves=unnamed_moves(
+        learnt_from(demos)))
     runs = info["successful"]                     # one verification run from each s_T
     unusable = runs - info["joined"] - info["relabelled"]
     log(f"  {info['attempts']} attempts, {info['successful']} successful, {runs} runs from s_T: "
@@ -439,7 +441,9 @@ def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, 
         f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
     if stats["higher_first"] is not None:          # the order the actor's data teach (stats.py)
         log(f"  {info['other_orders']} also in another order; {stats['higher_first']:.0%} of the "
-            f"{stats['multi_layer_steps']} steps with goals on several layers move a higher one")
+            f"{stats['multi_layer_steps']} steps with goals on several layers move a higher one; "
+            f"{info['parts']} parts: {stats['unnamed_moves']:.1%} of the steps move a block no "
+            "goal names")
     record["expansion"] = info
     if demos:
         record.update(self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar, log))
@@ -473,7 +477,7 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
     agent.threads = min(workers, SHARDS)      # both cores on every minibatch (the same results)
     with one_blas_thread(), physics_pool(workers, cfg.n_blocks, drop) as pool:
         envs, short_envs = run_worlds(cfg, pool)
-        evals = eval_tasks(cfg, envs[0])
+        evals, families = eval_tasks(cfg, envs[0]), family_tasks(cfg, envs[0])
         for k in range(run.last_round + 1, cfg.rounds + 1):
             with phase(f"round {k}"):
                 if k == 0:
@@ -486,8 +490,9 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
                 else:
                     record = expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar,
                                              log)
-            run.results["rounds"].append(dict(round=k, eval=evaluate(agent, evals, envs, bar),
-                                              **record))
+            run.results["rounds"].append(dict(        # and, not in the paper, the families
+                round=k, eval=evaluate(agent, evals, envs, bar), families={
+                    f: evaluate(agent, t, envs, bar, f) for f, t in families.items()}, **record))
             run.last_round = k
             if on_round:
                 on_round(k, agent, run, rng)

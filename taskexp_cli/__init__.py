@@ -29,7 +29,7 @@ from taskexp_lib.checkpoint import load_state, save_json, save_state, saved_resu
 from taskexp_lib.config import Config, saved_config
 from taskexp_lib.features import FEATURES
 from taskexp_lib.nets import NETWORKS
-from taskexp_lib.shapes import SHAPES
+from taskexp_lib.shapes import FAMILIES, SHAPES
 
 from . import report
 
@@ -38,13 +38,15 @@ from . import report
 # --------------------------------------------------------------------------------------------
 
 CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",),
-           "shapes": tuple(SHAPES), "dtype": ("float32", "float64"),
+           "shapes": tuple(SHAPES), "families": tuple(FAMILIES),
+           "dtype": ("float32", "float64"),
            "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place")}
 MIN_ZERO = {"seed", "rounds", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add",
+            "goal_parts", "base_pairs",
             "label_tasks", "label_top", "label_pair"}
 AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
-SCALED = ("base_demos", "ppo_steps", "expand_episodes", "eval_episodes", "ppo_episodes",
-          "label_tasks")
+SCALED = ("base_demos", "base_pairs", "ppo_steps", "expand_episodes", "eval_episodes",
+          "ppo_episodes", "label_tasks")
 RUN_FILES = ("results.json", "state.npz", "round*.npz")      # what a run leaves in its directory
 RUN_FIELDS = ("seed", "rounds")                   # Config fields among the run flags of --help
 ENGINEERING = ("dtype", "n_envs")                 # how it computes, not what it learns
@@ -200,8 +202,9 @@ def usable_cores():
 def given_settings(a):
     """{Config field: value} of the flags given on a command line that parser() parsed into `a`."""
     given = {f.name: getattr(a, f.name) for f in fields(Config) if getattr(a, f.name) is not None}
-    if "shapes" in given:
-        given["shapes"] = tuple(given["shapes"])
+    for name in ("shapes", "families"):
+        if name in given:
+            given[name] = tuple(given[name])
     return given
 
 
@@ -312,6 +315,8 @@ def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar, workers=1):
         ev = run.results["rounds"][-1]["eval"]
         log(f"round {k}: zero-shot " + ", ".join(f"{s} {v:.0%}" for s, v in ev.items())
             + f"  ({clock['total_s']:.0f}s so far, peak memory {clock['peak_memory_mb']} MB)")
+        for family, rates in run.results["rounds"][-1].get("families", {}).items():
+            log(f"  {family}: " + ", ".join(f"{s} {v:.0%}" for s, v in rates.items()))
         t_round[0] = time.time()
 
     return taskexp.train(cfg, agent, state, rng, on_round=after_round, bar=bar, log=log,

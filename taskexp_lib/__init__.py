@@ -15,8 +15,11 @@ the agent (agent.py): what those three are built from, and the plumbing around t
   stress.py      stress actions for the physics tests and benchmarks
   exercises/     the graded problem set: a grader and one file per exercise
 
-and one_blas_thread(), the one setting a run makes for the whole process.
+and one_blas_thread(), the one setting a run makes for the whole process, and phase(), which says
+where in a run training diverged.
 """
+from contextlib import contextmanager
+
 import numpy  # noqa: F401  (loads BLAS first: threadpoolctl limits only libraries already loaded)
 from threadpoolctl import threadpool_limits
 
@@ -26,3 +29,12 @@ def one_blas_thread():
     10-100x slower, and results change with the thread count. A context manager for a block
     (taskexp.train runs in one); called on its own, for the rest of the program (a notebook)."""
     return threadpool_limits(limits=1)
+
+
+@contextmanager
+def phase(where):
+    """Prefix a FloatingPointError raised by training (nn.check_finite) with where in the run."""
+    try:
+        yield
+    except FloatingPointError as e:
+        raise FloatingPointError(f"{where}: {e}") from None

@@ -220,6 +220,7 @@ def load_state(path, cfg, rng, template):
     results = json.loads(str(data["results"]))
     ours, theirs = asdict(cfg), upgraded(results["config"])
     ours["shapes"], theirs["rounds"] = list(ours["shapes"]), ours["rounds"]   # rounds may grow
+    ours["families"], theirs["families"] = list(ours["families"]), list(theirs["families"])
     if ours != theirs:
         diff = {k: (theirs.get(k), v) for k, v in ours.items() if theirs.get(k) != v}
         raise ValueError(f"{path}: saved by a run with other settings (saved, now): {diff}")

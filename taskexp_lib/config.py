@@ -51,6 +51,10 @@ class Config:
     (off: any x, and in the world that drops 82% of them land on a block: then most one-step
     extensions that a block on the table can carry lie out of the base skills' reach, equation
     (1) picks ones that do not depend on the base task, and the data teach "higher goal first")"""
+    base_pairs: int = 0
+    """sec 4.1, not in the paper: two-move random demonstrations whose parts (one block's goal
+    each; taskexp_lib/hindsight.py) that move a block no goal names join the base demos: a block
+    moved away from where the other came to rest, or put under it; 0 = off"""
     max_stay: int = 2
     """sec 4.1: up to this many "stay where you are" goals for other blocks in a base task"""
     bc_epochs: int = 8
@@ -103,6 +107,11 @@ class Config:
     """sec 4.2, not in the paper: BC learns each generated demonstration's moves in another order
     too, where the simulator, replaying them so from s_0, meets the same goals; the data then
     insist only on the order that physics demands (taskexp_lib/orders.py)"""
+    goal_parts: int = 0
+    """sec 4.2, not in the paper: parts of its goals drawn per generated demonstration, which BC
+    and PPO also learn, each with the moves it needs (replayed without the others), where a block
+    that no goal of the part names moves: a support, or a block moved out of the way
+    (taskexp_lib/hindsight.py); 0 = off"""
 
     label_tasks: int = 2000
     """not in the paper: labelled outcomes as data for V(s, g) (taskexp_lib/labels.py), on this
@@ -137,11 +146,18 @@ class Config:
     """sec 5.3: "direct-ppo" replaces task expansion by PPO on the evaluation tasks"""
     shapes: tuple = ("I", "Y", "3T")
     """sec 5: the held-out shapes evaluated after every round"""
+    families: tuple = ("blocked", "air")
+    """not in the paper: the task families evaluated after every round beside the shapes, in
+    which blocks that no goal names must move (a site to clear, supports to build; shapes.py)"""
 
 
 # Fields added since runs were first kept, each with the value that does what the code before it
 # did: a run saved without the field resumes with that value
-ADDED = {"other_orders": False}                                # 2026-12-04
+ADDED = {"other_orders": False,                                # 2026-12-04
+         "goal_parts": 0, "base_pairs": 0,                       # 2026-12-06
+         # evaluation only: a run made before learns the same, and is tried on them from its
+         # next round on
+         "families": ("blocked", "air")}
 # Fields removed since, each with the only value today's code can go on with: they served variants
 # whose findings are in lab/notes.md (hard_picks, label_later_*: measured at main f915fea;
 # distill_data: at ba5e9fb)
@@ -170,4 +186,5 @@ def upgraded(settings):
 def saved_config(settings):
     """The Config of a run's settings as results.json saves them (shapes a list, upgraded)."""
     settings = upgraded(settings)
-    return Config(**{**settings, "shapes": tuple(settings["shapes"])})
+    return Config(**{**settings, "shapes": tuple(settings["shapes"]),
+                     "families": tuple(settings["families"])})

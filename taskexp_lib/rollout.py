@@ -7,7 +7,7 @@ Results do not depend on the number of workers: a step is a pure function of (st
 """
 import multiprocessing
 import signal
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -74,7 +74,8 @@ class Trajectory:
     success: bool
     logp: np.ndarray = None
     values: np.ndarray = None
-    other_order: "Trajectory" = None    # the same task, its moves in another order (taskexp.py)
+    other_order: "Trajectory" = None    # the same task, its moves in another order (orders.py)
+    parts: list = field(default_factory=list)    # parts of its goals, their moves (hindsight.py)
 
     def obs(self, goals=None):
         """Observations (T+1, n, 6) of the visited states under `goals` (default: its own)."""

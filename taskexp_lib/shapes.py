@@ -1,8 +1,9 @@
 """taskexp_lib/shapes.py -- the held-out shapes of sec 5 and their fixed evaluation scenes (the
-2D analogues of the paper's test structures; taskexp.evaluate builds them zero-shot)."""
+2D analogues of the paper's test structures; taskexp.evaluate builds them zero-shot), and two
+families of tasks beside them in which blocks that no goal names must move (FAMILIES)."""
 import numpy as np
 
-from .geometry import BLOCK_W
+from .geometry import BLOCK_H, BLOCK_W
 
 # Held-out shapes: (offset from the centre in block widths, layer). None of them can occur among
 # the base tasks (at most 3 goals, at most one block moved), and each has >= 4 goals with >= 3
@@ -13,15 +14,26 @@ SHAPES = {
     "3T": [(-1, 0), (0, 0), (1, 0), (-0.5, 1), (0.5, 1), (0, 2)],  # three tiers, 3-2-1
 }
 
+# Not in the paper: tasks that no goal-named block can solve alone, as cells like SHAPES'.
+# "blocked": a held-out shape whose scene has a block that no goal names standing on the spot of
+# a ground goal (it must be moved away first). "air": goals whose supports no goal names, over an
+# empty spot (free blocks must be stacked under them).
+FAMILIES = {
+    "blocked": {"I": SHAPES["I"], "Y": SHAPES["Y"]},
+    "air": {"1 up": [(0, 1)], "2 up": [(0, 2)], "3 up": [(0, 3)],
+            "two apart": [(-1.5, 1), (1.5, 1)],                    # one storey up, each
+            "tower top": [(0, 2), (0, 3)]},                        # a tower's top, base free
+}
 
-def shape_goals(name, env, rng):
-    """Goals for a held-out shape at a random place, with randomly assigned blocks.
 
-    Returns {block: (x, y)}; the shape's centre lies on the x grid so every goal is reachable.
+def place_cells(cells, env, rng):
+    """Goals for cells [(dx, layer)] at a random place, with randomly assigned blocks.
+
+    Returns {block: (x, y)}; the centre lies on the x grid so every goal is reachable.
     """
-    cells = SHAPES[name]
     if len(cells) > env.n_blocks:
-        raise ValueError(f"shape {name!r} needs {len(cells)} blocks, the world has {env.n_blocks}")
+        raise ValueError(f"{len(cells)} cells need {len(cells)} blocks, "
+                         f"the world has {env.n_blocks}")
     reach = max(abs(dx) for dx, _ in cells) * BLOCK_W
     x = env.x_bins
     fits = (x - reach >= x[0] - 1e-9) & (x + reach <= x[-1] + 1e-9)
@@ -31,10 +43,31 @@ def shape_goals(name, env, rng):
             for b, (dx, k) in zip(blocks, cells)}
 
 
+def shape_goals(name, env, rng):
+    """Goals for the held-out shape `name` at a random place, with randomly assigned blocks."""
+    if len(SHAPES[name]) > env.n_blocks:
+        raise ValueError(f"shape {name!r} needs {len(SHAPES[name])} blocks, "
+                         f"the world has {env.n_blocks}")
+    return place_cells(SHAPES[name], env, rng)
+
+
 def start_state(env, goals, rng):
     """A random scattered scene for these goals (the env keeps goal footprints clear)."""
     env.reset(seed=int(rng.integers(2**31)), options={"goals": goals})
     return env.get_state()
+
+
+def blocked_state(env, goals, rng):
+    """A scattered scene for these goals, then a block that no goal names set down on the spot of
+    a random ground goal (the scene kept that spot free, so it touches no other block)."""
+    state = start_state(env, goals, rng)
+    free = [b for b in range(env.n_blocks) if b not in goals]
+    ground = [xy for xy in goals.values() if xy[1] < BLOCK_H]
+    if not free or not ground:
+        raise ValueError("a blocked scene needs a block without a goal and a goal on the ground")
+    b, (x, _) = int(rng.choice(free)), ground[rng.integers(len(ground))]
+    state[b, :3] = (x, BLOCK_H / 2, 0.0)
+    return state
 
 
 def eval_tasks(cfg, env):
@@ -47,3 +80,71 @@ def eval_tasks(cfg, env):
             goals = shape_goals(name, env, rng)
             out[name].append((start_state(env, goals, rng), goals))
     return out
+
+
+def supports(goals):
+    """The spots [(x, y)] that blocks no goal names must fill under goals {block: (x, y)} in the
+    air: under every goal, down to the table, each layer where no goal or support overlaps it."""
+    filled = list(goals.values())
+    for x, y in sorted(goals.values(), key=lambda xy: -xy[1]):
+        for y_below in np.arange(y - BLOCK_H, 0, -BLOCK_H):
+            if not any(abs(fx - x) < BLOCK_W and abs(fy - y_below) < BLOCK_H / 2
+                       for fx, fy in filled):
+                filled.append((float(x), float(y_below)))
+    return filled[len(goals):]
+
+
+def family_tasks(cfg, env):
+    """Fixed evaluation tasks of the families cfg.families: {family: {task: [(s0, goals)]}},
+    cfg.eval_episodes each, from a Generator of their own (so the held-out shapes' scenes do not
+    change with them). A task that needs more blocks than the world has is left out."""
+    rng = np.random.default_rng([cfg.seed, cfg.eval_salt, 1])
+    out = {}
+    for family in cfg.families:
+        scene = blocked_state if family == "blocked" else start_state
+        out[family] = {}
+        for name, cells in FAMILIES[family].items():
+            spots = {i: (dx * BLOCK_W, (k + 0.5) * BLOCK_H) for i, (dx, k) in enumerate(cells)}
+            need = len(cells) + len(supports(spots)) + (family == "blocked")   # + the blocker
+            if need > env.n_blocks:
+                continue
+            out[family][name] = []
+            for _ in range(cfg.eval_episodes):
+                goals = place_cells(cells, env, rng)
+                out[family][name].append((scene(env, goals, rng), goals))
+    return out
+
+
+def scripted_build(env, state, goals):
+    """A scripted builder, to check that a scene can be built (tests; lab/bench): clear every
+    block off the columns the goals and their supports need, then fill those spots bottom-up,
+    goal blocks at their goals and blocks that no goal names at the supports. env: a world that
+    drops (BlockWorld(drop=True)) with room for the moves. Returns True when the goals hold."""
+    from .geometry import is_success
+    spots = [(xy, b) for b, xy in goals.items()] + [(xy, None) for xy in supports(goals)]
+    columns = [x for (x, _), _ in spots]
+    env.reset(options={"state": state, "goals": goals})
+
+    def drop(b, x):
+        return env.step(env.encode_action(b, x, env.y_bins[0]))[2]
+
+    def apart(x, others):                                  # no overlap, touching allowed
+        return all(abs(x - o) > BLOCK_W - 1e-6 for o in others)
+
+    in_the_way = [b for b in np.argsort(-state[:, 1]) if not apart(state[b, 0], columns)]
+
+    for b in in_the_way:                                   # the highest first
+        others = np.delete(env.get_state(), b, axis=0)[:, 0]
+        away = [x for x in env.x_bins if apart(x, columns)]
+        on_table = [x for x in away if apart(x, others)]       # else onto a block out of the way
+        if not away:
+            return False
+        drop(int(b), (on_table or away)[0])
+    spare = [b for b in range(env.n_blocks) if b not in goals]
+    for (x, y), b in sorted(spots, key=lambda spot: spot[0][1]):
+        if b is None:
+            if not spare:
+                return False
+            b = spare.pop()
+        drop(b, x)
+    return is_success(env.get_state(), goals, env.threshold)

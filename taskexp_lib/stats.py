@@ -66,3 +66,10 @@ def order_stats(demos, threshold=THRESHOLD):
              if len(set(pending_layers(s, d.goals, threshold).values())) > 1]
     return dict(multi_layer_steps=len(kinds),
                 higher_first=kinds.count("higher goal") / len(kinds) if kinds else None)
+
+
+def unnamed_moves(demos):
+    """The share of the demonstrations' steps that move a block no goal names (None without
+    steps): the leading indicator of whether the data teach to clear a site or build a support."""
+    moved = [int(a[0]) in d.goals for d in demos for a in d.actions]
+    return 1 - sum(moved) / len(moved) if moved else None

@@ -130,6 +130,8 @@ def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
     out, res = run_cli(tmp_path)
     assert [r["round"] for r in res["rounds"]] == [0, 1]
     assert set(res["rounds"][1]["eval"]) == {"I", "Y", "3T"}
+    families = res["rounds"][1]["families"]            # not in the paper: blocks no goal names
+    assert set(families) == {"blocked", "air"} and set(families["blocked"]) == {"I", "Y"}
     for k in (0, 1):
         agent = Agent.load(os.path.join(out, f"round{k}.npz"))
         assert agent.act(np.zeros((6, 6), np.float32)).shape == (3,)
@@ -137,6 +139,7 @@ def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
     assert expansion["picks_reached"] == expansion["joined"] / expansion["successful"]
     printed = capsys.readouterr().out
     assert "Table 1" in printed and "Table 2" in printed and "picks reached" in printed
+    assert "Zero-shot success, blocked" in printed and "| 1 up | 2 up |" in printed
     assert os.path.exists(os.path.join(out, "fig1_max_goal_height.png"))
 
 
@@ -154,7 +157,7 @@ def test_every_phase_of_a_run_shows_progress(tmp_path):
     cli.run(cfg, str(tmp_path / "run"), log=lambda *a: None, bar=bar)
     phases = {"demos", "BC", "PPO base", "collect 1", "rank 1", "label 1", "value fit",
               "pair value fit", "collect", "eq. (1)", "verify", "other orders", "PPO distil",
-              "zero-shot"}
+              "zero-shot", "blocked", "air"} | ({"parts"} if taskexp.Config.goal_parts else set())
     assert phases <= set(asked), phases - set(asked)
 
 

@@ -79,7 +79,8 @@ def headline(by_variant):
     """The README's headline as markdown lines: one table, zero-shot success of the default
     round by round and of Table 3's rows after round 1 (direct PPO: every round it was run
     for), each mean +- std over the seeds kept, next to the paper's; then the tall tasks
-    generated, round by round."""
+    generated, round by round, and the default's families of blocks that no goal names (where
+    its runs measured them)."""
     ours = by_variant["ours"]
     rounds, shapes = ours[0]["config"]["rounds"], list(ours[0]["config"]["shapes"])
     every = range(1, rounds + 1)
@@ -104,11 +105,19 @@ def headline(by_variant):
     seeds = ", ".join(str(r["config"]["seed"]) for r in ours)
     tall = " / ".join(f"{np.mean([r['rounds'][k]['high_goal_tasks'] for r in ours]):.0f}"
                       for k in every)
-    return [*out, "", f"Seeds {seeds}, mean +- std over the seeds. The paper's figures are from a "
+    out += ["", f"Seeds {seeds}, mean +- std over the seeds. The paper's figures are from a "
             "3D world with about 150M PPO steps per round; for the ablations, the mean of its "
             "Table 3. Tasks generated with >= 3 goals above the ground, rounds "
             f"{' / '.join(map(str, every))}: {tall} (the paper: "
             f"{' / '.join(map(str, PAPER_T1['high_goal_tasks']))})."]
+    means = reproduce.family_means
+    if all(means(r, k) for r in ours for k in every):           # runs made before: no families
+        family = lambda f: " / ".join(f"{np.mean([means(r, k)[f] for r in ours]):.0f}"
+                                      for k in every)
+        out += ["", f"Blocks no goal names, after rounds {' / '.join(map(str, every))}: "
+                + ", ".join(f"{f} {family(f)}%" for f in means(ours[0], rounds))
+                + f" (mean over the family's tasks and seeds {seeds})."]
+    return out
 
 
 def comparison(by_variant):

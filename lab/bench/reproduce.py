@@ -16,8 +16,9 @@ README's headline comes from the same copies), named as taskexp.py names its fol
 (ours-relations-seedK for the relations); a feature set other than the default may be kept for
 ours alone.
 Writes lab/RESULTS.md (mean +- std over seeds, the targets checked against them, the
-machine and the wall-clock time), its figures in lab/results/, and appends lab/discussion.md, the
-team's reading of the numbers, which is written by hand.
+machine and the wall-clock time; beside the shapes the families in which blocks that no goal names
+must move, for runs that measured them), its figures in lab/results/, and appends
+lab/discussion.md, the team's reading of the numbers, which is written by hand.
 """
 import argparse
 import json
@@ -36,7 +37,7 @@ from run_seeds import KEPT, kept_name, load, pm, run_dir, run_one, split_argv  #
 
 LAB = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))     # lab/: the report, notes
 
-from taskexp_cli.report import DPI, FIGURES, histogram_figure  # noqa: E402
+from taskexp_cli.report import DPI, FAMILY_TITLES, FIGURES, histogram_figure  # noqa: E402
 from taskexp_lib.config import Config, saved_config  # noqa: E402
 
 # The paper's numbers (shared/paper/README.md): Table 1 by round 1-3, Table 2 by round 1-3,
@@ -66,6 +67,21 @@ def success(run, k, shape=None):
     """Zero-shot success (%) of a run after round k: one shape, or the mean over the shapes."""
     ev = run["rounds"][k]["eval"]
     return 100 * (ev[shape] if shape else np.mean(list(ev.values())))
+
+
+def family_success(run, k):
+    """Zero-shot success (%) after round k of a run on each task of the families in which blocks
+    that no goal names must move (taskexp_lib/shapes.py, FAMILIES): {family: {task: rate}}, or {}
+    for a run made before they were measured (a family without tasks left out)."""
+    return {family: {task: 100 * rate for task, rate in rates.items()}
+            for family, rates in run["rounds"][k].get("families", {}).items() if rates}
+
+
+def family_means(run, k):
+    """Each family's zero-shot success (%) after round k of a run, the mean over its tasks:
+    {family: mean}, or {} for a run made before the families were measured."""
+    return {family: float(np.mean(list(rates.values())))
+            for family, rates in family_success(run, k).items()}
 
 
 def picks_reached(rows):
@@ -122,6 +138,21 @@ def table_first_moves(runs, rounds, shapes):
         out.append(f"| {k} |" + "".join(f" {cell(s, 'right')} / {cell(s, 'higher goal')} |"
                                         for s in shapes))
     return out
+
+
+def table_families(runs, rounds):
+    """The families of blocks that no goal names: each family's mean over its tasks round by
+    round, then each of its tasks after the last round, mean +- std over seeds (a dash for a
+    round some run did not measure them in)."""
+    families = family_success(runs[0], rounds)
+    cell = lambda k, f: (pm([family_means(r, k)[f] for r in runs], "%")
+                         if all(f in family_means(r, k) for r in runs) else "-")
+    out = ["| round |" + "".join(f" {f}: mean over its tasks |" for f in families),
+           "|---" * (1 + len(families)) + "|"]
+    out += [f"| {k} |" + "".join(f" {cell(k, f)} |" for f in families) for k in range(rounds + 1)]
+    return out + ["", f"| after round {rounds} | task | zero-shot success |", "|---|---|---|"] + [
+        f"| {f} | {t} | {pm([family_success(r, rounds)[f][t] for r in runs], '%')} |"
+        for f, tasks in families.items() for t in tasks]
 
 
 def table_feasible(runs):
@@ -202,6 +233,18 @@ def targets(by_variant, rounds, shapes):
                     for k in range(1, rounds + 1) for s in shapes)
         out.append(("first move right >= 90% of each shape's scenes after every round from 1 "
                     "(lab/bench/build_order.py; lowest shown)", f"{worst:.0f}%", worst >= 90))
+    if all(family_means(r, rounds) for r in ours):             # runs made before: no families
+        means = {f: np.mean([family_means(r, rounds)[f] for r in ours])
+                 for f in family_means(ours[0], rounds)}
+        tasks = {f: {t: np.mean([family_success(r, rounds)[f][t] for r in ours]) for t in rates}
+                 for f, rates in family_success(ours[0], rounds).items()}
+        out += [(f"each family's mean over its tasks >= 80% after round {rounds} (blocks that no "
+                 "goal names must move)", ", ".join(f"{f} {m:.0f}%" for f, m in means.items()),
+                 all(m >= 80 for m in means.values())),
+                (f"every task of the families >= 60% after round {rounds}",
+                 "; ".join(f"{f}: " + ", ".join(f"{t} {m:.0f}%" for t, m in rates.items())
+                           for f, rates in tasks.items()),
+                 all(m >= 60 for rates in tasks.values() for m in rates.values()))]
     if all("feasible" in r for r in ours):
         picks = np.mean([100 * r["feasible"]["feasible_picks"] for r in ours])
         out.insert(0, ("feasible among equation (1)'s picks, round-0 critic >= 75%",
@@ -335,6 +378,12 @@ def main():
             link = os.path.relpath(path, os.path.dirname(os.path.abspath(a.out)))
             md += [f"{title}:", "", f"![{title}]({link})", ""]
         md += ["### Table 2: zero-shot success (ours)", "", *table2(ours, a.rounds, shapes), ""]
+        if all(family_means(r, a.rounds) for r in ours):      # runs made before: no families
+            md += ["### Blocks no goal names: zero-shot success of the families", "",
+                   "Not in the paper (taskexp_lib/shapes.py, FAMILIES): "
+                   + "; ".join(FAMILY_TITLES.get(f, f) for f in family_means(ours[0], a.rounds))
+                   + ". Each family's mean over its tasks round by round, then each task after "
+                   f"round {a.rounds}:", "", *table_families(ours, a.rounds), ""]
         if all("build_order" in r for r in ours):
             md += ["### The order of the moves (lab/bench/build_order.py)", "",
                    "The greedy policy's first move on the evaluation scenes after each round: "

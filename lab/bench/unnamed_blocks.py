@@ -1,0 +1,87 @@
+"""Does the policy move blocks that no goal names? The leading indicator of the families, in
+seconds.
+
+    python lab/bench/unnamed_blocks.py runs/ours-seed0/round1.npz
+    python lab/bench/unnamed_blocks.py runs/ours-seed0/round*.npz --episodes 40
+    python lab/bench/unnamed_blocks.py --data runs/ours-seed0/state.npz
+
+A blocked site and a goal in the air (taskexp_lib/shapes.py, FAMILIES) are solved only by moving a
+block that no goal names: away from the site, or under the goal. For each checkpoint it runs the
+greedy policy on the run's own family scenes (the seed from the run's results.json beside it,
+else --seed) and prints, per task, the zero-shot success and the share of first moves, and of all
+moves, that move a block no goal names. With --data it reads a run's state.npz and prints the
+share of the BC buffer's steps that do (the data must show such moves before a policy makes them).
+"""
+import argparse
+import glob
+import os
+import sys
+
+import numpy as np
+
+sys.path.insert(0, os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..")))
+from build_order import run_seed  # noqa: E402
+
+import taskexp  # noqa: E402
+from agent import Agent  # noqa: E402
+from env2d import run_worlds  # noqa: E402
+from taskexp_lib import one_blas_thread  # noqa: E402
+from taskexp_lib.checkpoint import load_npz  # noqa: E402
+from taskexp_lib.rollout import run_episodes  # noqa: E402
+from taskexp_lib.shapes import FAMILIES, family_tasks  # noqa: E402
+
+
+def measure(checkpoint, seed=0, episodes=100):
+    """-> {family: {task: {success, first_unnamed, unnamed}}} for one checkpoint."""
+    agent = Agent.load(checkpoint)
+    cfg = taskexp.Config(seed=run_seed(checkpoint, seed), eval_episodes=episodes,
+                         families=tuple(FAMILIES), n_blocks=agent.n_blocks)
+    envs, _ = run_worlds(cfg)
+    out = {}
+    for family, tasks_by_name in family_tasks(cfg, envs[0]).items():
+        out[family] = {}
+        for name, tasks in tasks_by_name.items():
+            trajs = run_episodes(agent, tasks, envs, deterministic=True)
+            unnamed = [[int(a[0]) not in t.goals for a in t.actions] for t in trajs]
+            out[family][name] = dict(
+                success=float(np.mean([t.success for t in trajs])),
+                first_unnamed=float(np.mean([u[0] for u in unnamed])),
+                unnamed=float(np.mean([x for u in unnamed for x in u])))
+    return out
+
+
+def buffer_share(state_path):
+    """The share of the BC buffer's steps in a run's state.npz that move a block no goal names
+    (the observation's has_goal column is 0 for the moved block) -> (share, steps)."""
+    data = load_npz(state_path)
+    obs, act = data["buffer_obs"], data["buffer_act"]
+    has_goal = obs[np.arange(len(act)), act[:, 0].astype(int), 5] > 0.5
+    return float(1 - has_goal.mean()), len(act)
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("checkpoints", nargs="*", help="round{k}.npz files (a glob is expanded)")
+    p.add_argument("--episodes", type=int, default=100, help="scenes per task")
+    p.add_argument("--seed", type=int, default=0,
+                   help="the scenes' seed when no results.json lies beside a checkpoint")
+    p.add_argument("--data", nargs="*", default=[], help="state.npz files: the BC buffer's share")
+    a = p.parse_args()
+    if not a.checkpoints and not a.data:
+        p.error("name a checkpoint or --data state.npz")
+    for path in a.data:
+        share, steps = buffer_share(path)
+        print(f"{path}: {100 * share:.2f}% of {steps} buffer steps move a block no goal names")
+    pc = lambda share: f"{100 * share:4.0f}%"
+    for path in [f for c in a.checkpoints for f in (sorted(glob.glob(c)) or [c])]:
+        print(path)
+        print("  family   task        success  first move unnamed  all moves unnamed")
+        for family, tasks in measure(path, a.seed, a.episodes).items():
+            for name, r in tasks.items():
+                print(f"  {family:8s} {name:10s}  {pc(r['success'])}    {pc(r['first_unnamed'])}"
+                      f"               {pc(r['unnamed'])}")
+
+
+if __name__ == "__main__":
+    with one_blas_thread():
+        main()

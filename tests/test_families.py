@@ -1,0 +1,138 @@
+"""Tests of the blocks no goal names: the evaluation families (blocked sites, goals in the air),
+their scripted builder, and the hindsight on goals that teaches them (taskexp_lib/hindsight.py)."""
+import numpy as np
+import pytest
+
+from env2d import BlockWorld
+from taskexp_lib import hindsight, shapes
+from taskexp_lib.config import Config
+from taskexp_lib.geometry import BLOCK_H, BLOCK_W, is_success, layer, layer_y
+from taskexp_lib.rollout import Trajectory, replay
+
+
+@pytest.fixture
+def world():
+    return BlockWorld(6, max_steps=30, drop=True)
+
+
+@pytest.fixture(scope="module")
+def families():
+    return shapes.family_tasks(Config(eval_episodes=12, seed=5), BlockWorld(6, drop=True))
+
+
+def test_supports_fill_every_layer_under_a_goal_in_the_air():
+    assert shapes.supports({0: (0.1, layer_y(0))}) == []
+    assert np.allclose(shapes.supports({0: (0.1, layer_y(2))}), [(0.1, layer_y(1)),
+                                                                 (0.1, layer_y(0))])
+    tower_top = {0: (0.0, layer_y(3)), 1: (0.0, layer_y(2))}
+    assert np.allclose(shapes.supports(tower_top), [(0.0, layer_y(1)), (0.0, layer_y(0))])
+    legs = {0: (-0.75 * BLOCK_W, layer_y(0)), 1: (0.75 * BLOCK_W, layer_y(0)),
+            2: (0.0, layer_y(1))}                                # "Y"'s bridge: no support
+    assert shapes.supports(legs) == []
+
+
+def test_family_scenes_need_blocks_no_goal_names_and_a_script_builds_them(families, world):
+    assert set(families) == {"blocked", "air"}
+    assert set(families["air"]) == set(shapes.FAMILIES["air"])
+    for family, tasks in families.items():
+        for name, scenes in tasks.items():
+            for s0, goals in scenes:
+                assert not is_success(s0, goals)
+                if family == "blocked":       # a block without a goal stands on a ground goal
+                    on_spot = [b for b in range(6) if b not in goals and any(
+                        np.hypot(s0[b, 0] - x, s0[b, 1] - y) < 1e-9 for x, y in goals.values())]
+                    assert len(on_spot) == 1, (name, goals, s0[:, :2])
+                else:                         # nothing stands under any goal, all on the table
+                    assert np.all(layer(s0[:, 1]) == 0)
+                    assert all(abs(s0[b, 0] - x) >= BLOCK_W - 1e-9 for b in range(6)
+                               for x, _ in goals.values())
+                    assert shapes.supports(goals)
+                assert shapes.scripted_build(world, s0, goals), (family, name, goals)
+
+
+def test_a_family_that_needs_more_blocks_than_the_world_has_is_left_out():
+    small = shapes.family_tasks(Config(eval_episodes=1, n_blocks=3), BlockWorld(3, drop=True))
+    assert set(small["air"]) == {"1 up", "2 up"}    # "3 up", "two apart", "tower top" need 4
+    assert small["blocked"] == {}                   # "I" needs 4 goal blocks and a blocker
+
+
+def test_scripted_builder_fails_where_a_block_is_missing(world):
+    """The builder is a check, not a rubber stamp: goals whose supports no free block can fill."""
+    goals = {b: (x, layer_y(2)) for b, x in enumerate((-0.3, 0.0, 0.3))}   # 6 supports, 3 free
+    s0 = shapes.start_state(world, goals, np.random.default_rng(0))
+    assert not shapes.scripted_build(world, s0, goals)
+
+
+def drops(world, moves):
+    return [world.encode_action(b, x, world.y_bins[0]) for b, x in moves]
+
+
+def played(world, s0, goals, moves):
+    return replay([(s0, goals)], [np.array(drops(world, moves))], [world])[0]
+
+
+def scene(world):
+    s0 = np.zeros((6, 6))
+    s0[:, 0], s0[:, 1] = (-0.45, -0.33, -0.21, 0.21, 0.33, 0.45), BLOCK_H / 2    # the middle free
+    return s0
+
+
+def test_a_part_keeps_the_support_its_goal_needs_and_drops_the_rest(world):
+    s0 = scene(world)
+    x = float(world.x_bins[16])                            # -0.05: a free spot
+    goals = {0: (x, layer_y(0)), 1: (x, layer_y(1)), 5: (0.1, layer_y(0))}
+    demo = played(world, s0, goals, [(5, 0.1), (0, x), (1, x)])
+    assert demo.success and len(demo.actions) == 3
+    part = hindsight.cut(demo, {1: goals[1]})               # the top block alone: 0 carries none
+    hindsight.needed_moves([part], [world])
+    assert [int(a[0]) for a in part.actions] == [0, 1]      # block 5's move is not needed
+    assert is_success(part.states[-1], part.goals) and not is_success(part.states[0], part.goals)
+
+
+def test_a_part_keeps_the_move_that_clears_its_site(world):
+    s0 = scene(world)
+    p = float(s0[2, 0])                                     # block 2 stands on the site
+    goals = {2: (0.05, layer_y(0)), 4: (p, layer_y(0))}
+    demo = played(world, s0, goals, [(2, 0.05), (4, p)])
+    assert demo.success
+    part = hindsight.cut(demo, {4: goals[4]})
+    hindsight.needed_moves([part], [world])
+    assert [int(a[0]) for a in part.actions] == [2, 4]      # 2, which no goal names, moves away
+    assert 2 not in part.goals
+
+
+def test_cut_ends_where_a_part_first_holds_and_refuses_one_held_at_the_start(world):
+    s0 = scene(world)
+    x = float(world.x_bins[18])
+    goals = {0: (x, layer_y(0)), 1: (x, layer_y(1))}
+    demo = played(world, s0, goals, [(0, x), (1, x)])
+    assert len(hindsight.cut(demo, {0: goals[0]}).actions) == 1
+    assert hindsight.cut(demo, {3: tuple(s0[3, :2])}) is None
+
+
+def test_goal_parts_are_proper_and_reproducible():
+    goals = {0: (0.0, 0.025), 3: (0.1, 0.025), 4: (0.2, 0.025)}
+    draws = [hindsight.goal_part(goals, np.random.default_rng(s)) for s in range(40)]
+    assert all(0 < len(d) < len(goals) and set(d) <= set(goals) for d in draws)
+    assert {len(d) for d in draws} == {1, 2}
+    assert draws[0] == hindsight.goal_part(goals, np.random.default_rng(0))
+
+
+def test_part_demos_keep_the_parts_that_move_a_block_no_goal_names(world):
+    s0 = scene(world)
+    x = float(world.x_bins[16])
+    tower = {0: (x, layer_y(0)), 1: (x, layer_y(1)), 2: (x, layer_y(2))}
+    demos = [played(world, s0, tower, [(0, x), (1, x), (2, x)]) for _ in range(10)]
+    apart = {0: (x, layer_y(0)), 5: (0.1, layer_y(0))}       # neither part needs the other's move
+    demos.append(played(world, s0, apart, [(0, x), (5, 0.1)]))
+    one = played(world, s0, {0: tower[0]}, [(0, x)])
+    made = hindsight.part_demos(demos + [one], [world], np.random.default_rng(0), 4)
+    assert one.parts == [] and demos[-1].parts == []        # no part moves a block it leaves out
+    assert made == sum(len(d.parts) for d in demos) > 10
+    for d in demos[:-1]:
+        assert len({tuple(sorted(p.goals)) for p in d.parts}) == len(d.parts)    # each once
+        for p in d.parts:
+            assert isinstance(p, Trajectory) and p.success
+            assert is_success(p.states[-1], p.goals)
+            assert any(int(a[0]) not in p.goals for a in p.actions)
+            assert set(p.goals) not in ({0}, {0, 1})       # the bottom needs no other block
