@@ -264,3 +264,16 @@ def test_histogram_figure_shows_each_round_share_spread_and_title():
     renderer = FigureCanvasAgg(fig).get_renderer()
     legend = ax.get_legend().get_window_extent(renderer)
     assert legend.x0 >= ax.get_window_extent(renderer).x1                     # covers no bar
+
+
+def test_cli_hindsight_on_goals_teaches_moves_of_blocks_no_goal_names(tmp_path):
+    """--base-pairs and --goal-parts (taskexp_lib/hindsight.py) add steps that move a block no
+    goal names, which the default's data never show, and reproduce byte for byte."""
+    flags = ("--base-pairs", "4000", "--goal-parts", "4")   # x 0.02: 80 pairs
+    (out, res), (again, _) = (run_cli(tmp_path / name, *flags) for name in ("a", "b"))
+    assert res["rounds"][1]["expansion"]["parts"] > 0 and res["rounds"][1]["unnamed_moves"] > 0
+    assert open(os.path.join(out, "round1.npz"), "rb").read() == \
+        open(os.path.join(again, "round1.npz"), "rb").read()
+    _, default = run_cli(tmp_path / "default")
+    assert default["rounds"][1]["expansion"]["parts"] == 0
+    assert default["rounds"][1]["unnamed_moves"] < res["rounds"][1]["unnamed_moves"]

@@ -120,16 +120,27 @@ def plot(by_checkpoint, path):
     fig.savefig(path, dpi=120)
 
 
-def main():
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("checkpoints", nargs="+", help="round{k}.npz files (a glob is expanded)")
-    p.add_argument("--episodes", type=int, default=100, help="evaluation scenes per shape")
+def checkpoint_parser(description, nargs="+"):
+    """The command line of a script that measures checkpoints on a run's evaluation scenes."""
+    p = argparse.ArgumentParser(description=description)
+    p.add_argument("checkpoints", nargs=nargs, help="round{k}.npz files (a glob is expanded)")
+    p.add_argument("--episodes", type=int, default=100, help="evaluation scenes per task")
     p.add_argument("--seed", type=int, default=0,
                    help="the evaluation scenes' seed when no results.json lies beside a checkpoint")
+    return p
+
+
+def expand(checkpoints):
+    """The checkpoints named, each glob expanded, in order."""
+    return [f for c in checkpoints for f in (sorted(glob.glob(c)) or [c])]
+
+
+def main():
+    p = checkpoint_parser(__doc__.split("\n")[0])
     p.add_argument("--json", help="also write the figures to this file")
     p.add_argument("--plot", help="draw the first moves per checkpoint into this PNG")
     a = p.parse_args()
-    paths = [f for c in a.checkpoints for f in (sorted(glob.glob(c)) or [c])]
+    paths = expand(a.checkpoints)
     by_checkpoint = {}
     for path in paths:
         m = by_checkpoint[path] = measure(path, a.seed, a.episodes)

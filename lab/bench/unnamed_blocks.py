@@ -12,15 +12,13 @@ else --seed) and prints, per task, the zero-shot success and the share of first 
 moves, that move a block no goal names. With --data it reads a run's state.npz and prints the
 share of the BC buffer's steps that do (the data must show such moves before a policy makes them).
 """
-import argparse
-import glob
 import os
 import sys
 
 import numpy as np
 
 sys.path.insert(0, os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..")))
-from build_order import run_seed  # noqa: E402
+from build_order import checkpoint_parser, expand, run_seed  # noqa: E402
 
 import taskexp  # noqa: E402
 from agent import Agent  # noqa: E402
@@ -60,11 +58,7 @@ def buffer_share(state_path):
 
 
 def main():
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    p.add_argument("checkpoints", nargs="*", help="round{k}.npz files (a glob is expanded)")
-    p.add_argument("--episodes", type=int, default=100, help="scenes per task")
-    p.add_argument("--seed", type=int, default=0,
-                   help="the scenes' seed when no results.json lies beside a checkpoint")
+    p = checkpoint_parser(__doc__.split("\n")[0], nargs="*")
     p.add_argument("--data", nargs="*", default=[], help="state.npz files: the BC buffer's share")
     a = p.parse_args()
     if not a.checkpoints and not a.data:
@@ -73,7 +67,7 @@ def main():
         share, steps = buffer_share(path)
         print(f"{path}: {100 * share:.2f}% of {steps} buffer steps move a block no goal names")
     pc = lambda share: f"{100 * share:4.0f}%"
-    for path in [f for c in a.checkpoints for f in (sorted(glob.glob(c)) or [c])]:
+    for path in expand(a.checkpoints):
         print(path)
         print("  family   task        success  first move unnamed  all moves unnamed")
         for family, tasks in measure(path, a.seed, a.episodes).items():
