@@ -364,6 +364,8 @@ def main(argv=None):
         results = run(cfg, out, resume=resume, workers=workers)
         print()
         print(report.tables(results))
+        if report.family_tables(results):
+            print("\n" + report.family_tables(results))
         for path in report.figures(results, out):
             print("wrote", path)
     except KeyboardInterrupt:

@@ -10,10 +10,12 @@ the agent (agent.py): what those three are built from, and the plumbing around t
   rollout.py     batched episodes, and the worker processes that run the physics
   shards.py      both cores on one minibatch: data-parallel gradients in two threads
   checkpoint.py  every file a run writes: checkpoints, the resume state, results.json
-  report.py      Tables 1 and 2, Figures 1 and 2
-  cli.py         the command line: flags, the run directory, --resume, progress bars
+  shapes.py      the held-out shapes, the families of blocks no goal names, their scenes
+  labels.py      labelled outcomes for V(s, g) (not in the paper)
+  orders.py      the generated demonstrations in other orders (not in the paper)
+  hindsight.py   a demonstration of goals g is one of any part of g (not in the paper)
+  stats.py       what the generated tasks and demonstrations look like
   stress.py      stress actions for the physics tests and benchmarks
-  exercises/     the graded problem set: a grader and one file per exercise
 
 and one_blas_thread(), the one setting a run makes for the whole process, and phase(), which says
 where in a run training diverged.

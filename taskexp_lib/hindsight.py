@@ -33,8 +33,8 @@ def cut(traj, goals):
     held = [t for t in range(len(traj.states)) if is_success(traj.states[t], goals)]
     if not held or held[0] == 0:
         return None
-    T = held[0]
-    return Trajectory(goals, traj.states[: T + 1], traj.actions[:T], True)
+    end = held[0] + 1                            # the states up to the first where they hold
+    return Trajectory(goals, traj.states[:end], traj.actions[:end - 1], True)
 
 
 def needed_moves(demos, envs, bar=None):

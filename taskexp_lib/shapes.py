@@ -61,7 +61,7 @@ def blocked_state(env, goals, rng):
     """A scattered scene for these goals, then a block that no goal names set down on the spot of
     a random ground goal (the scene kept that spot free, so it touches no other block)."""
     state = start_state(env, goals, rng)
-    free = [b for b in range(env.n_blocks) if b not in goals]
+    free = sorted(set(range(env.n_blocks)) - set(goals))          # blocks no goal names
     ground = [xy for xy in goals.values() if xy[1] < BLOCK_H]
     if not free or not ground:
         raise ValueError("a blocked scene needs a block without a goal and a goal on the ground")
@@ -140,7 +140,7 @@ def scripted_build(env, state, goals):
         if not away:
             return False
         drop(int(b), (on_table or away)[0])
-    spare = [b for b in range(env.n_blocks) if b not in goals]
+    spare = sorted(set(range(env.n_blocks)) - set(goals))         # for the supports
     for (x, y), b in sorted(spots, key=lambda spot: spot[0][1]):
         if b is None:
             if not spare:
