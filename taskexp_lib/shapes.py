@@ -3,7 +3,7 @@
 families of tasks beside them in which blocks that no goal names must move (FAMILIES)."""
 import numpy as np
 
-from .geometry import BLOCK_H, BLOCK_W
+from .geometry import BLOCK_H, BLOCK_W, is_success
 
 # Held-out shapes: (offset from the centre in block widths, layer). None of them can occur among
 # the base tasks (at most 3 goals, at most one block moved), and each has >= 4 goals with >= 3
@@ -120,25 +120,22 @@ def scripted_build(env, state, goals):
     block off the columns the goals and their supports need, then fill those spots bottom-up,
     goal blocks at their goals and blocks that no goal names at the supports. env: a world that
     drops (BlockWorld(drop=True)) with room for the moves. Returns True when the goals hold."""
-    from .geometry import is_success
     spots = [(xy, b) for b, xy in goals.items()] + [(xy, None) for xy in supports(goals)]
     columns = [x for (x, _), _ in spots]
     env.reset(options={"state": state, "goals": goals})
 
     def drop(b, x):
-        return env.step(env.encode_action(b, x, env.y_bins[0]))[2]
+        env.step(env.encode_action(b, x, env.y_bins[0]))
 
     def apart(x, others):                                  # no overlap, touching allowed
         return all(abs(x - o) > BLOCK_W - 1e-6 for o in others)
 
-    in_the_way = [b for b in np.argsort(-state[:, 1]) if not apart(state[b, 0], columns)]
-
-    for b in in_the_way:                                   # the highest first
-        others = np.delete(env.get_state(), b, axis=0)[:, 0]
-        away = [x for x in env.x_bins if apart(x, columns)]
-        on_table = [x for x in away if apart(x, others)]       # else onto a block out of the way
-        if not away:
-            return False
+    away = [x for x in env.x_bins if apart(x, columns)]
+    if not away:
+        return False
+    for b in [b for b in np.argsort(-state[:, 1]) if not apart(state[b, 0], columns)]:
+        others = np.delete(env.get_state(), b, axis=0)[:, 0]      # the highest in the way first
+        on_table = [x for x in away if apart(x, others)]        # else onto a block out of the way
         drop(int(b), (on_table or away)[0])
     spare = sorted(set(range(env.n_blocks)) - set(goals))         # for the supports
     for (x, y), b in sorted(spots, key=lambda spot: spot[0][1]):
