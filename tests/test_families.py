@@ -136,3 +136,22 @@ def test_part_demos_keep_the_parts_that_move_a_block_no_goal_names(world):
             assert is_success(p.states[-1], p.goals)
             assert any(int(a[0]) not in p.goals for a in p.actions)
             assert set(p.goals) not in ({0}, {0, 1})       # the bottom needs no other block
+
+
+def test_the_indicator_counts_the_moves_of_blocks_no_goal_names(tmp_path):
+    """lab/bench/unnamed_blocks.py on an untrained checkpoint: every task measured, shares in
+    0..1, and the first-move share is what the episodes' first actions say."""
+    import os
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "lab", "bench"))
+    import unnamed_blocks
+    from agent import Agent
+    path = str(tmp_path / "round0.npz")
+    Agent(6, n_x=37, n_y=1, hidden=16, seed=0).save(path)
+    m = unnamed_blocks.measure(path, seed=0, episodes=3)
+    assert {f: set(t) for f, t in m.items()} == {f: set(t) for f, t in shapes.FAMILIES.items()}
+    for tasks in m.values():
+        for r in tasks.values():
+            assert all(0.0 <= r[k] <= 1.0 for k in ("success", "first_unnamed", "unnamed"))
+            assert r["first_unnamed"] * 3 == round(r["first_unnamed"] * 3)     # of 3 scenes
