@@ -146,6 +146,7 @@ def test_the_indicator_counts_the_moves_of_blocks_no_goal_names(tmp_path):
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
                                     "lab", "bench"))
     import unnamed_blocks
+
     from agent import Agent
     path = str(tmp_path / "round0.npz")
     Agent(6, n_x=37, n_y=1, hidden=16, seed=0).save(path)
