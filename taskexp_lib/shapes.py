@@ -26,14 +26,13 @@ FAMILIES = {
 }
 
 
-def place_cells(cells, env, rng):
+def place_cells(cells, env, rng, name="the cells"):
     """Goals for cells [(dx, layer)] at a random place, with randomly assigned blocks.
 
     Returns {block: (x, y)}; the centre lies on the x grid so every goal is reachable.
     """
     if len(cells) > env.n_blocks:
-        raise ValueError(f"{len(cells)} cells need {len(cells)} blocks, "
-                         f"the world has {env.n_blocks}")
+        raise ValueError(f"{name} needs {len(cells)} blocks, the world has {env.n_blocks}")
     reach = max(abs(dx) for dx, _ in cells) * BLOCK_W
     x = env.x_bins
     fits = (x - reach >= x[0] - 1e-9) & (x + reach <= x[-1] + 1e-9)
@@ -45,10 +44,7 @@ def place_cells(cells, env, rng):
 
 def shape_goals(name, env, rng):
     """Goals for the held-out shape `name` at a random place, with randomly assigned blocks."""
-    if len(SHAPES[name]) > env.n_blocks:
-        raise ValueError(f"shape {name!r} needs {len(SHAPES[name])} blocks, "
-                         f"the world has {env.n_blocks}")
-    return place_cells(SHAPES[name], env, rng)
+    return place_cells(SHAPES[name], env, rng, name=f"shape {name!r}")
 
 
 def start_state(env, goals, rng):
