@@ -17,6 +17,7 @@ checks, float32 for training); losses, log-probs and returns are always float64.
 through a passed np.random.Generator (or an integer seed for initialisation). Checkpoints are
 read and written by taskexp_lib/checkpoint.py.
 """
+import warnings
 from functools import partial
 
 import numpy as np
@@ -25,10 +26,15 @@ from tqdm import tqdm
 from taskexp_lib import checkpoint
 from taskexp_lib.config import Config
 from taskexp_lib.features import featurize
-from taskexp_lib.geometry import N_X
+from taskexp_lib.geometry import MAX_BLOCKS, N_X
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.nn import Adam, check_finite, clip_grad_norm, mlp_backward
 from taskexp_lib.shards import DataParallel
+
+
+class OtherWorldWarning(UserWarning):
+    """An agent acts in a world of another number of blocks than it learnt in (Agent.features)."""
+
 
 # ---- The factorised action distribution (sec 3):  pi(b, x, y) = pi(b) pi(x | b) pi(y | b) ----
 
@@ -204,8 +210,9 @@ class Agent:
 
     The defaults are Config's: attention over plain features in float32, for the world that drops
     blocks, whose action has no layer (n_y = 1). For the world that places blocks in layers, n_y
-    is the number of layers (n_blocks). The features always code n_blocks layers. A run builds its
-    agent from its Config with taskexp.make_agent.
+    is the number of layers (n_blocks). It learns in a world of n_blocks blocks and acts in one of
+    any number with the same weights (features). A run builds its agent from its Config with
+    taskexp.make_agent.
 
     mlp_backward(params, hs, dout) -> (grads, dx) is the backward pass of every MLP in them, and
     action_dist the class of the policy's distribution (default ActionDist): the library's, or a
@@ -232,6 +239,7 @@ class Agent:
         self.actor_opt, self.critic_opt = Adam(self.actor.params), Adam(self.critic.params)
         self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
         self.threads = 1        # threads for a minibatch's parts (shards.py): same results for any
+        self.worlds_told = set()        # the other block counts it has said it acts in
 
     @property
     def drops(self):
@@ -239,11 +247,31 @@ class Agent:
         return self.n_y == 1
 
     def features(self, obs):
-        """obs (B, n, 6) -> (B, n, F) in the networks' dtype; checks the number of blocks."""
+        """obs (B, n, 6) -> (B, n, F) in the networks' dtype.
+
+        The agent learnt in a world of n_blocks blocks, and acts and values in one of any n in
+        2..MAX_BLOCKS with the same weights: self-attention takes any number of block tokens,
+        and heights are scaled by the n_blocks layers it learnt with, whatever the world. It says
+        so, once per n (OtherWorldWarning).
+        """
         obs = np.asarray(obs, dtype=np.float64)
-        if obs.ndim != 3 or obs.shape[1:] != (self.n_blocks, 6):
-            raise ValueError(f"obs must have shape (B, {self.n_blocks}, 6), got {obs.shape}")
+        if obs.ndim != 3 or obs.shape[-1] != 6 or not 2 <= obs.shape[1] <= MAX_BLOCKS:
+            raise ValueError(f"obs must have shape (B, n, 6) with n in 2..{MAX_BLOCKS} blocks, "
+                             f"got {obs.shape}")
+        n = obs.shape[1]
+        if n != self.n_blocks and n not in self.worlds_told:
+            self.worlds_told.add(n)
+            warnings.warn(f"this agent learnt in a world of {self.n_blocks} blocks; it acts in "
+                          f"one of {n} with the same weights", OtherWorldWarning, stacklevel=3)
         return featurize(obs, self.n_blocks, self.feature_set).astype(self.dtype, copy=False)
+
+    def policy(self, f):
+        """The action distribution at features f (B, n, F). In a world that places, with fewer
+        layers than the agent learnt (n < n_y), only the layers that world has."""
+        out = self.actor.forward(f)
+        if not self.drops and f.shape[1] < self.n_y:
+            out = out[..., :1 + self.n_x + f.shape[1]]
+        return self.action_dist(out, self.n_x)
 
     def _batched(self, obs):
         obs = np.asarray(obs, dtype=np.float64)
@@ -253,7 +281,7 @@ class Agent:
         """obs (n, 6) -> action (3,) int64, or (B, n, 6) -> (B, 3).  Samples with rng (default:
         the agent's own seeded Generator), or takes the joint mode when deterministic."""
         obs, single = self._batched(obs)
-        dist = self.action_dist(self.actor.forward(self.features(obs)), self.n_x)
+        dist = self.policy(self.features(obs))
         a = dist.mode() if deterministic else dist.sample(self.rng if rng is None else rng)
         return a[0] if single else a
 
@@ -267,7 +295,7 @@ class Agent:
     def sample(self, obs, rng=None):
         """obs (B, n, 6) -> actions (B, 3) int64, logp (B,), values (B,)  (for rollouts)."""
         f = self.features(obs)
-        dist = self.action_dist(self.actor.forward(f), self.n_x)
+        dist = self.policy(f)
         a = dist.sample(self.rng if rng is None else rng)
         return a, dist.log_prob(a), self.critic.forward(f)[..., 0].mean(-1)
 

@@ -32,6 +32,7 @@ from taskexp_lib.draw import draw_scene, rgb_array
 from taskexp_lib.geometry import (
     BLOCK_H,
     BLOCK_W,
+    MAX_BLOCKS,
     N_X,
     SAME_SPOT,
     TABLE_X,
@@ -118,7 +119,6 @@ def drop_height(x, others):
     return top + BLOCK_H / 2
 
 
-
 class BlockWorld(gymnasium.Env):
     """The block world as a Gymnasium environment (see the module docstring).
 
@@ -132,8 +132,8 @@ class BlockWorld(gymnasium.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(self, n_blocks=6, max_steps=10, render_mode=None, drop=False):
-        if not (isinstance(n_blocks, (int, np.integer)) and 2 <= n_blocks <= 8):
-            raise ValueError(f"n_blocks={n_blocks!r}: need an int in 2..8 to fit the table")
+        if not (isinstance(n_blocks, (int, np.integer)) and 2 <= n_blocks <= MAX_BLOCKS):
+            raise ValueError(f"n_blocks={n_blocks!r}: need an int in 2..{MAX_BLOCKS} (the table)")
         if not (isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool)
                 and max_steps >= 1):
             raise ValueError(f"max_steps={max_steps!r}: need an int >= 1 (actions per episode)")
@@ -484,10 +484,10 @@ gymnasium.register(id="taskexp/BlockWorld-v0", entry_point=BlockWorld, kwargs=di
 
 # ---- the worlds of a run: many at once, their physics in worker processes (rollout.py) ----
 
-def physics_pool(workers, n_blocks, drop=False):
-    """A PhysicsPool of BlockWorlds for workers > 1; with one, the main process steps the worlds
-    itself."""
-    make_world = partial(BlockWorld, n_blocks, drop=drop)       # picklable, for "spawn"
+def physics_pool(workers, drop=False):
+    """A PhysicsPool of BlockWorlds (of any number of blocks) for workers > 1; with one, the main
+    process steps the worlds itself."""
+    make_world = partial(BlockWorld, drop=drop)       # picklable, for "spawn"
     return PhysicsPool(workers, make_world) if workers > 1 else nullcontext()
 
 

@@ -9,6 +9,7 @@
                            run the policy from sT toward g*: join on success, relabel on failure
   sec 4.3  self_distill    BC on the generated demos, then PPO on the generated tasks
   sec 5    evaluate        zero-shot success on held-out shapes ("I", "Y", "3T") after every round
+                           (and, not in the paper, in worlds of other block counts)
            train           the loop that calls them in order: read it last
 
 A task is a pair (s0, goals): a state array (n_blocks, 6) and a dict {block: (x, y)}.
@@ -21,7 +22,7 @@ in the package taskexp_cli. `python taskexp.py --rounds 3` runs taskexp_cli.main
 if __name__ == "__main__":
     from taskexp_cli import main
     raise SystemExit(main())
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from typing import Callable
 
@@ -38,7 +39,7 @@ from taskexp_lib.hindsight import learnt_from, pair_parts, part_demos
 from taskexp_lib.labels import labelled
 from taskexp_lib.nn import mlp_backward
 from taskexp_lib.orders import other_orders, with_other_orders
-from taskexp_lib.rollout import Trajectory, run_episodes, success_rate
+from taskexp_lib.rollout import Trajectory, demo_arrays, run_episodes, success_rate
 from taskexp_lib.shapes import eval_tasks, family_tasks
 from taskexp_lib.shards import SHARDS, read_only_map
 from taskexp_lib.stats import order_stats, task_stats, unnamed_moves
@@ -359,12 +360,6 @@ class RunState:
     results: dict = field(default_factory=dict)    # config, one record per round, wall-clock
 
 
-def demo_arrays(demos):
-    """All (observation, action) pairs of a list of demonstrations: (N, n, 6), (N, 3)."""
-    return (np.concatenate([d.obs()[:-1] for d in demos]),
-            np.concatenate([d.actions for d in demos]))
-
-
 def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=silent, log=print):
     """Sec 4.3: BC on the new demos mixed with the kept ones, then PPO on the new tasks mixed with
     as many old ones. The buffer and the task list keep the newest cfg.buffer_size entries (the
@@ -475,9 +470,13 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
     run = run or RunState(results=dict(config=asdict(cfg), rounds=[], wallclock={}))
     drop = cfg.action == "drop"
     agent.threads = min(workers, SHARDS)      # both cores on every minibatch (the same results)
-    with one_blas_thread(), physics_pool(workers, cfg.n_blocks, drop) as pool:
+    with one_blas_thread(), physics_pool(workers, drop) as pool:
         envs, short_envs = run_worlds(cfg, pool)
         evals, families = eval_tasks(cfg, envs[0]), family_tasks(cfg, envs[0])
+        # not in the paper: the shapes in worlds of other block counts, with the same weights
+        others = {str(n): run_worlds(replace(cfg, n_blocks=n), pool)[0] for n in cfg.eval_blocks}
+        others = {n: (worlds, eval_tasks(cfg, worlds[0])) for n, worlds in others.items()}
+        agent.worlds_told.update(cfg.eval_blocks)         # the round's log says it acts in them
         for k in range(run.last_round + 1, cfg.rounds + 1):
             with phase(f"round {k}"):
                 if k == 0:
@@ -492,7 +491,9 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
                                              log)
             run.results["rounds"].append(dict(        # and, not in the paper, the families
                 round=k, eval=evaluate(agent, evals, envs, bar), families={
-                    f: evaluate(agent, t, envs, bar, f) for f, t in families.items()}, **record))
+                    f: evaluate(agent, t, envs, bar, f) for f, t in families.items()},
+                blocks={n: evaluate(agent, t, w, bar, n) for n, (w, t) in others.items()},
+                **record))
             run.last_round = k
             if on_round:
                 on_round(k, agent, run, rng)

@@ -3,6 +3,8 @@ Config, the run directory, checkpoints after every round, resuming a stopped run
 
     python taskexp.py --rounds 3            # the same as `taskexp --rounds 3` once installed
     python taskexp.py --help                         # every Config field is a flag
+    python -m taskexp_cli try runs/ours-seed0/round3.npz "0,0 0,1 0,2" --blocks 7
+                                                     # a structure you write (try_structure.py)
 
 A run directory holds round{k}.npz (the agent after round k, for agent.Agent.load), state.npz
 (everything --resume needs to go on exactly as if never stopped), results.json, and the figures.
@@ -26,7 +28,7 @@ from tqdm import tqdm
 import taskexp
 from taskexp import RunState
 from taskexp_lib.checkpoint import load_state, save_json, save_state, saved_results
-from taskexp_lib.config import Config, saved_config
+from taskexp_lib.config import TUPLES, Config, saved_config
 from taskexp_lib.features import FEATURES
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.shapes import FAMILIES, SHAPES
@@ -57,6 +59,8 @@ EXAMPLES = """examples:
   taskexp --select end2new --rounds 1       an ablation of Table 3, in runs/end2new-seed0
   taskexp --baseline direct-ppo --rounds 1  PPO directly on the held-out shapes
   taskexp --resume --out runs/ours-seed0    go on after a kill or Ctrl-C
+  taskexp try runs/ours-seed0/round3.npz "0,0 0,1 1.5,0 1.5,1 0.75,2" --blocks 7
+                                            a trained agent builds a structure you write
 (python taskexp.py is the same command)"""
 
 
@@ -107,6 +111,8 @@ def parser():
         names = [flag(f.name)] + (["--n-blocks"] if f.name == "n_blocks" else [])
         if f.type is bool:
             kw["action"] = argparse.BooleanOptionalAction
+        elif f.name == "eval_blocks":                      # block counts; none is allowed
+            kw["nargs"], kw["type"] = "*", int
         elif f.type is tuple:
             kw["nargs"] = "+"
         else:
@@ -135,6 +141,9 @@ def problem(cfg):
     if not need <= cfg.n_blocks <= 8:
         return (f"--blocks must be in {need}..8 (the held-out shapes need {need} blocks, the table "
                 f"holds 8), got {cfg.n_blocks}")
+    if any(not need <= n <= 8 for n in cfg.eval_blocks):
+        return (f"--eval-blocks must be block counts in {need}..8 (the held-out shapes need {need} "
+                f"blocks, the table holds 8), got {' '.join(map(str, cfg.eval_blocks))}")
     for f in fields(Config):
         v = getattr(cfg, f.name)
         if f.type in (int, float):
@@ -202,7 +211,7 @@ def usable_cores():
 def given_settings(a):
     """{Config field: value} of the flags given on a command line that parser() parsed into `a`."""
     given = {f.name: getattr(a, f.name) for f in fields(Config) if getattr(a, f.name) is not None}
-    for name in ("shapes", "families"):
+    for name in TUPLES:
         if name in given:
             given[name] = tuple(given[name])
     return given
@@ -317,6 +326,9 @@ def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar, workers=1):
             + f"  ({clock['total_s']:.0f}s so far, peak memory {clock['peak_memory_mb']} MB)")
         for family, rates in run.results["rounds"][-1].get("families", {}).items():
             log(f"  {family}: " + ", ".join(f"{s} {v:.0%}" for s, v in rates.items()))
+        for n, rates in run.results["rounds"][-1].get("blocks", {}).items():
+            log(f"  {n} blocks, the weights learnt with {cfg.n_blocks}: "
+                + ", ".join(f"{s} {v:.0%}" for s, v in rates.items()))
         t_round[0] = time.time()
 
     return taskexp.train(cfg, agent, state, rng, on_round=after_round, bar=bar, log=log,
@@ -356,6 +368,10 @@ def settings_note(cfg, out, resume, scale):
 
 
 def main(argv=None):
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["try"]:                     # python -m taskexp_cli try CHECKPOINT STRUCTURE
+        from .try_structure import main as try_main
+        return try_main(argv[1:])
     cfg, out, resume, scale, workers = parse_args(argv)
     note = settings_note(cfg, out, resume, scale)
     if note:
@@ -364,8 +380,9 @@ def main(argv=None):
         results = run(cfg, out, resume=resume, workers=workers)
         print()
         print(report.tables(results))
-        if report.family_tables(results):
-            print("\n" + report.family_tables(results))
+        for more in (report.family_tables(results), report.blocks_table(results)):
+            if more:
+                print("\n" + more)
         for path in report.figures(results, out):
             print("wrote", path)
     except KeyboardInterrupt:

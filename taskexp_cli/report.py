@@ -35,6 +35,24 @@ def family_tables(results):
     return "\n".join(out[1:])
 
 
+def blocks_table(results):
+    """Not in the paper: zero-shot success on the held-out shapes in worlds of other block counts,
+    with the weights learnt in the run's own, beside it, round by round ("" for a run made before
+    they were measured)."""
+    rounds, n = results["rounds"], results["config"]["n_blocks"]
+    counts = list(rounds[-1].get("blocks", {}))
+    if not counts:
+        return ""
+    shapes = list(rounds[0]["eval"])
+    out = [f"Zero-shot success in worlds of other block counts (the weights learnt with {n})",
+           "| round | blocks | " + " | ".join(shapes) + " |", "|---" * (len(shapes) + 2) + "|"]
+    for r in rounds:
+        for count, rates in [(str(n), r["eval"]), *r.get("blocks", {}).items()]:
+            out.append(f"| {r['round']} | {count} | "
+                       + " | ".join(f"{100 * rates[s]:.0f}%" for s in shapes) + " |")
+    return "\n".join(out)
+
+
 FAMILY_TITLES = {"blocked": "blocked: a block no goal names stands on a ground goal's spot",
                  "air": "air: goals whose supports no goal names, over an empty spot"}
 

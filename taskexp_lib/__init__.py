@@ -10,7 +10,8 @@ the agent (agent.py): what those three are built from, and the plumbing around t
   rollout.py     batched episodes, and the worker processes that run the physics
   shards.py      both cores on one minibatch: data-parallel gradients in two threads
   checkpoint.py  every file a run writes: checkpoints, the resume state, results.json
-  shapes.py      the held-out shapes, the families of blocks no goal names, their scenes
+  shapes.py      the held-out shapes, the families of blocks no goal names, their scenes, and
+                 structures a person writes (read_structure)
   labels.py      labelled outcomes for V(s, g) (not in the paper)
   orders.py      the generated demonstrations in other orders (not in the paper)
   hindsight.py   a demonstration of goals g is one of any part of g (not in the paper)

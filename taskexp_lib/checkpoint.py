@@ -14,7 +14,7 @@ from dataclasses import asdict
 
 import numpy as np
 
-from .config import RemovedSetting, saved_config, upgraded
+from .config import TUPLES, RemovedSetting, saved_config, upgraded
 from .features import FEATURES
 from .geometry import GEOMETRY
 from .nets import NETWORKS
@@ -219,8 +219,9 @@ def load_state(path, cfg, rng, template):
         raise ValueError(f"{path}: state_version {data['state_version']}, expected {STATE_VERSION}")
     results = json.loads(str(data["results"]))
     ours, theirs = asdict(cfg), upgraded(results["config"])
-    ours["shapes"], theirs["rounds"] = list(ours["shapes"]), ours["rounds"]   # rounds may grow
-    ours["families"], theirs["families"] = list(ours["families"]), list(theirs["families"])
+    theirs["rounds"] = ours["rounds"]                                        # rounds may grow
+    for name in TUPLES:                                         # lists in JSON, ADDED's tuples
+        ours[name], theirs[name] = list(ours[name]), list(theirs[name])
     if ours != theirs:
         diff = {k: (theirs.get(k), v) for k, v in ours.items() if theirs.get(k) != v}
         raise ValueError(f"{path}: saved by a run with other settings (saved, now): {diff}")

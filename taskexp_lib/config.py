@@ -149,7 +149,12 @@ class Config:
     families: tuple = ("blocked", "air")
     """not in the paper: the task families evaluated after every round beside the shapes, in
     which blocks that no goal names must move (a site to clear, supports to build; shapes.py)"""
+    eval_blocks: tuple = (7, 8)
+    """not in the paper: worlds of other numbers of blocks in which the held-out shapes are tried
+    after every round too, with the weights learnt in this one (none: --eval-blocks alone)"""
 
+
+TUPLES = ("shapes", "families", "eval_blocks")        # fields that results.json saves as lists
 
 # Fields added since runs were first kept, each with the value that does what the code before it
 # did: a run saved without the field resumes with that value
@@ -157,7 +162,8 @@ ADDED = {"other_orders": False,                                # 2026-12-04
          "goal_parts": 0, "base_pairs": 0,                       # 2026-12-06
          # evaluation only: a run made before learns the same, and is tried on them from its
          # next round on
-         "families": ("blocked", "air")}
+         "families": ("blocked", "air"),
+         "eval_blocks": (7, 8)}                                  # 2026-12-06, evaluation only
 # Fields removed since, each with the only value today's code can go on with: they served variants
 # whose findings are in lab/notes.md (hard_picks, label_later_*: measured at main f915fea;
 # distill_data: at ba5e9fb)
@@ -186,5 +192,4 @@ def upgraded(settings):
 def saved_config(settings):
     """The Config of a run's settings as results.json saves them (shapes a list, upgraded)."""
     settings = upgraded(settings)
-    return Config(**{**settings, "shapes": tuple(settings["shapes"]),
-                     "families": tuple(settings["families"])})
+    return Config(**{**settings, **{name: tuple(settings[name]) for name in TUPLES}})

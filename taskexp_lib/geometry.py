@@ -10,6 +10,7 @@ import numpy as np
 BLOCK_W, BLOCK_H = 0.10, 0.05               # metres; width twice the height
 TABLE_X = (-0.5, 0.5)                       # ten block widths
 THRESHOLD = 0.02                            # a goal holds within 2 cm (euclidean, block centre)
+MAX_BLOCKS = 8                              # the most blocks a world holds (2..8)
 N_X = 37
 # spacing BLOCK_W / 4; a block on any bin lies on the table
 X_BINS = np.linspace(-0.45, 0.45, N_X)

@@ -13,22 +13,27 @@ import numpy as np
 
 from .geometry import observation
 
-_WORLD = None                  # a worker's own world, which simulates for the main process
+_MAKE_WORLD, _WORLDS = None, {}   # a worker's own worlds, by block count, which simulate for
+                                  # the main process
 
 
 def _start_worker(make_world):
-    global _WORLD
+    global _MAKE_WORLD
     signal.signal(signal.SIGINT, signal.SIG_IGN)    # Ctrl-C is the main process's to handle
-    _WORLD = make_world()
+    _MAKE_WORLD = make_world
 
 
 def _simulate(job):
-    return _WORLD.simulate(*job)
+    state, action = job
+    if len(state) not in _WORLDS:
+        _WORLDS[len(state)] = _MAKE_WORLD(len(state))
+    return _WORLDS[len(state)].simulate(state, action)
 
 
 class PhysicsPool:
     """Worker processes that run world.simulate for the worlds of the main process; each worker
-    makes its own world with make_world() (env2d.physics_pool: a BlockWorld).
+    makes its own world of n blocks with make_world(n) (env2d.physics_pool: a BlockWorld) when it
+    first meets a state of n blocks.
 
     Started with "spawn", which works the same on Linux, macOS and Windows and from a notebook.
     A worker whose main process dies (even by SIGKILL) finds its pipe closed and exits.
@@ -81,6 +86,12 @@ class Trajectory:
         """Observations (T+1, n, 6) of the visited states under `goals` (default: its own)."""
         g = self.goals if goals is None else goals
         return np.stack([observation(s, g) for s in self.states])
+
+
+def demo_arrays(demos):
+    """All (observation, action) pairs of a list of demonstrations: (N, n, 6), (N, 3)."""
+    return (np.concatenate([d.obs()[:-1] for d in demos]),
+            np.concatenate([d.actions for d in demos]))
 
 
 def simulate(envs, ks, actions):

@@ -3,7 +3,7 @@
 families of tasks beside them in which blocks that no goal names must move (FAMILIES)."""
 import numpy as np
 
-from .geometry import BLOCK_H, BLOCK_W, is_success
+from .geometry import BLOCK_H, BLOCK_W, X_BINS, is_success, layer_y
 
 # Held-out shapes: (offset from the centre in block widths, layer). None of them can occur among
 # the base tasks (at most 3 goals, at most one block moved), and each has >= 4 goals with >= 3
@@ -26,6 +26,62 @@ FAMILIES = {
 }
 
 
+# A structure a person writes (taskexp_cli's `try`): cells like SHAPES' as text, "dx,layer" each,
+# separated by spaces, e.g. "0,0 0,1 1.5,0 1.5,1 0.75,2" (two towers and a block across). dx
+# is in block widths from the structure's centre, on the action grid (a multiple of GRID); layer 0
+# rests on the table. A goal may be in the air: blocks that no goal names must go under it.
+GRID = (X_BINS[1] - X_BINS[0]) / BLOCK_W            # 0.25: the x grid's spacing in block widths
+SPAN = (X_BINS[-1] - X_BINS[0]) / BLOCK_W           # 9: the widest a structure's centres may lie
+WRITE = 'write cells as dx,layer separated by spaces, e.g. "0,0 0,1 0,2"'
+
+
+def read_structure(text, n_blocks=8):
+    """The cells [(dx, layer)] of a structure written as text (or a name in SHAPES) that a world
+    of n_blocks can hold; anything else is a ValueError whose message is one line."""
+    if text.strip() in SHAPES:
+        cells = SHAPES[text.strip()]
+    else:
+        cells = [read_cell(word) for word in text.replace(";", " ").split()]
+    if not cells:
+        raise ValueError(f"no cells: {WRITE}")
+    for i, (dx, k) in enumerate(cells):
+        for dx2, k2 in cells[i + 1:]:
+            if k == k2 and abs(dx - dx2) < 1:
+                raise ValueError(f"cells {dx:g},{k} and {dx2:g},{k2} overlap: blocks in one layer "
+                                 "lie at least 1 (a block width) apart")
+    width = max(dx for dx, _ in cells) - min(dx for dx, _ in cells)
+    if width > SPAN + 1e-9:
+        raise ValueError(f"the cells lie {width:g} block widths apart; the action grid spans "
+                         f"{SPAN:g}")
+    need = blocks_needed(cells)
+    if need > n_blocks:
+        raise ValueError(f"the structure needs {need} blocks ({len(cells)} with goals, "
+                         f"{need - len(cells)} under goals in the air); the world has {n_blocks}")
+    return cells
+
+
+def read_cell(word):
+    """(dx, layer) of one cell written "dx,layer"; a one-line ValueError otherwise."""
+    try:
+        dx, k = (float(v) for v in word.split(","))
+    except ValueError:
+        raise ValueError(f"cell {word!r}: {WRITE}") from None
+    if not np.isfinite([dx, k]).all():
+        raise ValueError(f"cell {word!r}: dx and the layer must be finite numbers")
+    if not abs(dx / GRID - round(dx / GRID)) < 1e-9:
+        raise ValueError(f"cell {word!r}: dx must be a multiple of {GRID:g} (the action grid)")
+    if not (k == int(k) and k >= 0):
+        raise ValueError(f"cell {word!r}: the layer must be a whole number >= 0 (0: the table)")
+    return dx, int(k)
+
+
+def blocks_needed(cells):
+    """Blocks that building cells [(dx, layer)] takes: one per cell, and the supports that blocks
+    no goal names must give the cells in the air."""
+    spots = {i: (dx * BLOCK_W, float(layer_y(k))) for i, (dx, k) in enumerate(cells)}
+    return len(cells) + len(supports(spots))
+
+
 def place_cells(cells, env, rng, name="the cells"):
     """Goals for cells [(dx, layer)] at a random place, with randomly assigned blocks.
 
@@ -33,9 +89,9 @@ def place_cells(cells, env, rng, name="the cells"):
     """
     if len(cells) > env.n_blocks:
         raise ValueError(f"{name} needs {len(cells)} blocks, the world has {env.n_blocks}")
-    reach = max(abs(dx) for dx, _ in cells) * BLOCK_W
+    left, right = (f(dx for dx, _ in cells) * BLOCK_W for f in (min, max))
     x = env.x_bins
-    fits = (x - reach >= x[0] - 1e-9) & (x + reach <= x[-1] + 1e-9)
+    fits = (x + left >= x[0] - 1e-9) & (x + right <= x[-1] + 1e-9)
     cx = x[fits][rng.integers(fits.sum())]
     blocks = rng.permutation(env.n_blocks)[: len(cells)]
     return {int(b): (float(cx + dx * BLOCK_W), float(env.y_bins[k]))
@@ -90,6 +146,15 @@ def supports(goals):
     return filled[len(goals):]
 
 
+def site_free(state, goals):
+    """True when no block stands on the table where the goals or their supports need the ground
+    (a goal block at its own goal aside): in a crowded scene some block must first move away."""
+    ground = [x for x, y in [*goals.values(), *supports(goals)] if y < BLOCK_H]
+    placed = {b for b, xy in goals.items() if is_success(state, {b: xy})}
+    return not any(abs(state[b, 0] - x) < BLOCK_W - 1e-6 and state[b, 1] < BLOCK_H
+                   for b in range(len(state)) if b not in placed for x in ground)
+
+
 def family_tasks(cfg, env):
     """Fixed evaluation tasks of the families cfg.families: {family: {task: [(s0, goals)]}},
     cfg.eval_episodes each, from a Generator of their own (so the held-out shapes' scenes do not
@@ -100,9 +165,7 @@ def family_tasks(cfg, env):
         scene = blocked_state if family == "blocked" else start_state
         out[family] = {}
         for name, cells in FAMILIES[family].items():
-            spots = {i: (dx * BLOCK_W, (k + 0.5) * BLOCK_H) for i, (dx, k) in enumerate(cells)}
-            need = len(cells) + len(supports(spots)) + (family == "blocked")   # + the blocker
-            if need > env.n_blocks:
+            if blocks_needed(cells) + (family == "blocked") > env.n_blocks:     # + the blocker
                 continue
             out[family][name] = []
             for _ in range(cfg.eval_episodes):

@@ -6,6 +6,7 @@ import pytest
 from agent import (
     ActionDist,
     Agent,
+    OtherWorldWarning,
     bc_loss,
     entropy_of,
     gae,
@@ -311,7 +312,9 @@ def test_act_value_sample_shapes_and_errors():
     assert np.array_equal([agent.act(o) for o in obs], [twin.act(o) for o in obs])
     assert agent.act(np.zeros((6, 6), np.float32)).shape == (3,)
     with pytest.raises(ValueError):
-        agent.act(np.zeros((4, 6)), deterministic=True)         # wrong number of blocks
+        agent.act(np.zeros((9, 6)), deterministic=True)         # more blocks than a world holds
+    with pytest.warns(OtherWorldWarning):                       # another world: it says so
+        assert agent.act(np.zeros((4, 6)), deterministic=True)[2] < 4      # a layer it has
     with pytest.raises(ValueError):
         agent.bc(obs, np.array([[0, 37, 0]] * 5), 1, 4, 1e-3, rng)   # x-bin out of range
 

@@ -26,7 +26,7 @@ from run_seeds import FLAGS  # noqa: E402
 
 import taskexp  # noqa: E402
 import taskexp_cli as cli  # noqa: E402
-from taskexp_lib import one_blas_thread  # noqa: E402
+from taskexp_lib import one_blas_thread, rollout  # noqa: E402
 from taskexp_lib.config import Config, saved_config  # noqa: E402
 
 
@@ -149,10 +149,23 @@ def test_bench_speed_accounts_for_every_phase(tmp_path):
     cfg = cli.parse_args(["--rounds", "1", "--scale", "0.02", "--out", "unused"]).cfg
     before = taskexp.labelled
     with one_blas_thread():
-        (_, per_round, _), spent = bench_speed.by_phase(cfg, 1, str(tmp_path / "run"))
-    assert taskexp.labelled is before
+        counted, simulate = bench_speed.Flops(), rollout.simulate
+        try:
+            (_, per_round, _), spent, actions = bench_speed.by_phase(cfg, 1, str(tmp_path / "run"),
+                                                                     counted)
+        finally:
+            counted.restore()
+    assert taskexp.labelled is before and rollout.simulate is simulate
     assert list(per_round) == [0, 1]
     assert all(s > 0 for s in spent.values()), spent      # the rest too: nothing counted twice
+    # every phase that steps the world or runs a network has its actions and operations booked
+    for line in ("base demos (sec 4.1)", "PPO: rollouts", "task expansion (sec 4.2)",
+                 "zero-shot evaluation", "labels: runs, ranking"):
+        assert actions[line] > 0, (line, actions)
+    assert set(actions) <= set(spent) and set(counted.by_phase) <= set(spent)
+    assert counted.by_phase["behaviour cloning (BC)"] > 0 and "base demos (sec 4.1)" not in \
+        counted.by_phase                                   # no network in the random demos
+    assert sum(counted.by_phase.values()) == sum(counted.total.values())
 
 
 def test_bench_speed_counts_the_networks_operations():

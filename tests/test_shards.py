@@ -134,7 +134,7 @@ def test_base_demos_are_the_same_with_the_physics_in_workers():
     cfg = taskexp.Config(n_envs=4)
     results = []
     for workers in (1, 2):
-        with physics_pool(workers, cfg.n_blocks, drop=True) as pool:
+        with physics_pool(workers, drop=True) as pool:
             envs, _ = run_worlds(cfg, pool)
             results.append(taskexp.base_demos(cfg, envs, np.random.default_rng(0), 50))
     (tasks1, obs1, act1), (tasks2, obs2, act2) = results

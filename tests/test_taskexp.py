@@ -132,6 +132,8 @@ def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
     assert set(res["rounds"][1]["eval"]) == {"I", "Y", "3T"}
     families = res["rounds"][1]["families"]            # not in the paper: blocks no goal names
     assert set(families) == {"blocked", "air"} and set(families["blocked"]) == {"I", "Y"}
+    blocks = res["rounds"][1]["blocks"]                # the same weights with 7 and 8 blocks
+    assert set(blocks) == {"7", "8"} and set(blocks["8"]) == {"I", "Y", "3T"}
     for k in (0, 1):
         agent = Agent.load(os.path.join(out, f"round{k}.npz"))
         assert agent.act(np.zeros((6, 6), np.float32)).shape == (3,)
@@ -140,6 +142,8 @@ def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "Table 1" in printed and "Table 2" in printed and "picks reached" in printed
     assert "Zero-shot success, blocked" in printed and "| 1 up | 2 up |" in printed
+    assert "worlds of other block counts (the weights learnt with 6)" in printed
+    assert "  8 blocks, the weights learnt with 6: I " in printed            # each round's log
     assert os.path.exists(os.path.join(out, "fig1_max_goal_height.png"))
 
 

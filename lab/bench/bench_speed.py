@@ -7,9 +7,10 @@
 Prints:
 1. the default run (`python taskexp.py --rounds 3`, all cores, at --hidden's width): wall time
    in all and per round, CPU utilisation (user + system time of the main process and its physics
-   workers / wall time), peak memory, its time by phase of the method (PHASES), and its floor:
-   the time its matrix products (counted by Flops) take at one core's peak rate, plus its
-   physics workers' CPU time, shared over the cores with nothing else done (no run is faster);
+   workers / wall time), peak memory, its time by phase of the method (PHASES), each beside its
+   floor: the time its matrix products (counted by Flops) take at one core's peak rate, plus its
+   actions' physics (counted by Actions) at the run's mean CPU per action, shared over the cores
+   with nothing else done (no phase is faster); then the whole run's floor;
 2. the share of physics, network forward/backward and everything else, measured with timers
    around BlockWorld.simulate and the networks in a --scale 0.25 run with one worker and one
    thread (the physics in the main process, so that it can be timed);
@@ -37,7 +38,7 @@ import env2d
 import taskexp
 import taskexp_cli as cli
 from agent import Agent
-from taskexp_lib import nn, one_blas_thread
+from taskexp_lib import nn, one_blas_thread, rollout
 from taskexp_lib.config import Config
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.shards import SHARDS
@@ -121,15 +122,58 @@ PHASES = {"base demos (sec 4.1)": ([(taskexp, "base_demos")], ()),
           "zero-shot evaluation": ([(taskexp, "evaluate")], ())}
 
 
-def by_phase(cfg, workers, out):
-    """timed_run with a timer around each of PHASES -> (its figures, {line: seconds}), the
-    seconds of a line without those of the lines it holds; "the rest" is the time outside."""
-    figures, spent = timed_around({line: calls for line, (calls, _) in PHASES.items()}, cfg,
-                                  workers, out)
+REST = "the rest (checkpoints, bookkeeping)"
+
+
+class InPhase(Wrap):
+    """Wraps cls.name so that, while a call runs, `line` is the innermost phase under way (the
+    top of `stack`): what Flops and Actions count inside is booked to it."""
+
+    def __init__(self, cls, name, line, stack):
+        self.line, self.stack = line, stack
+        super().__init__(cls, name)
+
+    def around(self, inner, *args, **kwargs):
+        self.stack.append(self.line)
+        try:
+            return inner(*args, **kwargs)
+        finally:
+            self.stack.pop()
+
+
+class Actions(Wrap):
+    """Counts the actions whose physics rollout.simulate runs, by the phase under way."""
+
+    def __init__(self, stack):
+        self.stack, self.total = stack, {}
+        super().__init__(rollout, "simulate")
+
+    def around(self, inner, envs, ks, actions):
+        line = self.stack[-1] if self.stack else REST
+        self.total[line] = self.total.get(line, 0) + len(ks)
+        return inner(envs, ks, actions)
+
+
+def by_phase(cfg, workers, out, counted=None):
+    """timed_run with a timer around each of PHASES -> (its figures, {line: seconds}, {line:
+    actions simulated}), the seconds of a line without those of the lines it holds; "the rest" is
+    the time outside. counted: a Flops, whose operations are then booked by phase too."""
+    stack = []
+    marks = [InPhase(*where, line, stack) for line, (calls, _) in PHASES.items()
+             for where in calls]
+    actions = Actions(stack)
+    if counted is not None:
+        counted.stack = stack
+    try:
+        figures, spent = timed_around({line: calls for line, (calls, _) in PHASES.items()}, cfg,
+                                      workers, out)
+    finally:
+        for wrap in [actions, *reversed(marks)]:
+            wrap.restore()
     for line, (_, inner) in PHASES.items():
         spent[line] -= sum(spent[i] for i in inner)
-    spent["the rest (checkpoints, bookkeeping)"] = figures[0] - sum(spent.values())
-    return figures, spent
+    spent[REST] = figures[0] - sum(spent.values())
+    return figures, spent, actions.total
 
 
 def shares(cfg, out):
@@ -183,7 +227,13 @@ class Flops:
 
     def __init__(self):
         self.total, self.per_sample = {"forward": 0, "backward": 0}, {}
+        self.stack, self.by_phase = [], {}       # by_phase: the operations of each phase's calls
         self.wraps = [Counted(self, Net, name) for Net in NETWORKS.values() for name in self.total]
+
+    def add(self, name, ops):
+        self.total[name] += ops
+        line = self.stack[-1] if self.stack else REST
+        self.by_phase[line] = self.by_phase.get(line, 0) + ops
 
     def sample(self, net, n, name):
         """The operations of one sample of n tokens through `name` of `net`, found once per
@@ -208,7 +258,7 @@ class Counted(Wrap):
 
     def around(self, inner, net, x, *args, **kwargs):
         B, n = np.shape(x)[:2]
-        self.counter.total[self.name] += B * self.counter.sample(net, n, self.name)
+        self.counter.add(self.name, B * self.counter.sample(net, n, self.name))
         return inner(net, x, *args, **kwargs)
 
 
@@ -312,7 +362,7 @@ def main():
             out = os.path.join(tmp, "full")
             counted, physics = Flops(), children_cpu()
             try:
-                (total, per_round, cpu), spent = by_phase(cfg, workers, out)
+                (total, per_round, cpu), spent, actions = by_phase(cfg, workers, out, counted)
             finally:
                 counted.restore()
             physics = children_cpu() - physics
@@ -320,12 +370,21 @@ def main():
             with open(os.path.join(out, "results.json")) as f:
                 memory = json.load(f)["wallclock"]["peak_memory_mb"]
             run = "default run" + ("" if a.hidden == Config.hidden else f" --hidden {a.hidden}")
+            ops, rate = counted.total, product_rate(cfg.hidden, cfg.n_blocks, cfg.dtype)
+            per_action = physics / max(sum(actions.values()), 1)    # the workers' CPU per action
             print(f"\n1. {run}, --workers {workers}: {total:.0f} s ({rounds}); CPU "
                   f"utilisation {cpu:.2f} of {workers} cores; peak memory of the main process "
-                  f"{memory} MB; by phase:")
+                  f"{memory} MB. By phase, beside its floor: its matrix products at one core's "
+                  f"peak rate and its actions' physics at {per_action * 1e3:.2f} ms of CPU each "
+                  f"(the run's mean), over {workers} cores with nothing else done:")
+            print(f"   {'phase':36s} {'time':>6s} {'share':>5s} {'floor':>6s} {'x floor':>7s} "
+                  f"{'actions':>8s}")
             for name, s in spent.items():
-                print(f"   {name:36s} {s:6.0f} s  {100 * s / total:4.0f}%")
-            ops, rate = counted.total, product_rate(cfg.hidden, cfg.n_blocks, cfg.dtype)
+                floor = (counted.by_phase.get(name, 0) / rate
+                         + actions.get(name, 0) * per_action) / workers
+                ratio = f"{s / floor:6.1f}x" if floor > 0.05 else "      -"
+                print(f"   {name:36s} {s:5.0f}s {100 * s / total:4.0f}% {floor:5.0f}s {ratio} "
+                      f"{actions.get(name, 0):8d}")
             products_s = sum(ops.values()) / rate
             least = (products_s + physics) / workers
             print(f"   its floor: the networks' matrix products, {sum(ops.values()):.2e} "

@@ -1,0 +1,148 @@
+"""taskexp_cli/try_structure.py -- a trained agent builds a structure that a person writes,
+zero-shot, in a world of any number of blocks: its success over fixed scenes, one attempt drawn.
+
+    python -m taskexp_cli try runs/ours-seed0/round3.npz "0,0 0,1 1.5,0 1.5,1 0.75,2"
+    python -m taskexp_cli try runs/ours-seed0/round3.npz 3T --blocks 7 --gif
+
+The structure is written as cells "dx,layer" (taskexp_lib/shapes.py, read_structure) or named
+(I, Y, 3T). Each scene places it at a random spot of the table, with random blocks for its cells,
+among the others scattered as the evaluation scatters them (shapes.start_state).
+"""
+import os
+from typing import NamedTuple
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from agent import Agent
+from env2d import BlockWorld
+from taskexp_lib import one_blas_thread
+from taskexp_lib.config import Config
+from taskexp_lib.draw import animate, draw_scene
+from taskexp_lib.geometry import MAX_BLOCKS
+from taskexp_lib.rollout import Trajectory, run_episodes
+from taskexp_lib.shapes import place_cells, read_structure, scripted_build, site_free, start_state
+
+from . import Parser  # a refusal is one line
+
+
+class Tried(NamedTuple):
+    """What try_structure measured: the cells, one episode per scene (Trajectory, in order), and
+    per scene whether its site was free at the start and whether a scripted builder built it."""
+    cells: list
+    episodes: list
+    free: list
+    scripted: list
+
+    def rate(self, which=None):
+        """Success over all scenes, or over the scenes where which[i] is True (None if none)."""
+        won = [t.success for i, t in enumerate(self.episodes) if which is None or which[i]]
+        return float(np.mean(won)) if won else None
+
+
+def try_structure(agent, structure, n_blocks=None, scenes=50, seed=0, max_steps=Config.max_steps):
+    """The greedy policy of `agent` on `scenes` fixed scenes of a structure (text or a name of
+    SHAPES) in a world of n_blocks (default: the one it learnt in) -> Tried. The scenes come from
+    a Generator seeded with `seed`. ValueError (one line): what no world of n_blocks can build."""
+    n_blocks = agent.n_blocks if n_blocks is None else n_blocks
+    if not (isinstance(n_blocks, (int, np.integer)) and 2 <= n_blocks <= MAX_BLOCKS):
+        raise ValueError(f"blocks: a world holds 2..{MAX_BLOCKS}, got {n_blocks!r}")
+    cells = read_structure(structure, n_blocks)
+    rng = np.random.default_rng(seed)
+    worlds = [BlockWorld(n_blocks, max_steps=max_steps, drop=agent.drops) for _ in range(16)]
+    tasks = []
+    for _ in range(scenes):
+        goals = place_cells(cells, worlds[0], rng, name="the structure")
+        tasks.append((start_state(worlds[0], goals, rng), goals))
+    episodes = run_episodes(agent, tasks, worlds, deterministic=True, values=False)
+    builder = BlockWorld(n_blocks, max_steps=4 * n_blocks, drop=True)
+    return Tried(cells, episodes, [site_free(s0, goals) for s0, goals in tasks],
+                 [scripted_build(builder, s0, goals) for s0, goals in tasks])
+
+
+def frame_titles(episode):
+    """A title per state of an episode: the start, each action, and how it ended."""
+    moved = [f"step {t + 1}: block {b}" for t, (b, _, _) in enumerate(episode.actions)]
+    end = "built" if episode.success else "not built"
+    return ["start, goals dashed", *moved[:-1], f"{moved[-1]}: {end}" if moved else end]
+
+
+def attempt_figure(episode: Trajectory, columns=4):
+    """One attempt, step by step: the start with the goals dashed, then the scene after each
+    action, the last titled with how it ended. A matplotlib Figure (no display needed)."""
+    titles, n = frame_titles(episode), len(episode.states)
+    rows = -(-n // columns)
+    fig = Figure(figsize=(3.2 * min(n, columns), 2.2 * rows))
+    for i, (state, title) in enumerate(zip(episode.states, titles)):
+        draw_scene(fig.add_subplot(rows, min(n, columns), i + 1), state, episode.goals, title)
+        fig.axes[-1].tick_params(labelsize=6)
+    fig.tight_layout()
+    return fig
+
+
+def summary(tried, n_blocks):
+    """What a person reads: success, how often the site was free, and what a scripted builder
+    that clears the site first achieved on the same scenes."""
+    scenes, free = len(tried.episodes), sum(tried.free)
+    won = sum(t.success for t in tried.episodes)
+    on_free = tried.rate(tried.free)
+    lines = [f"built in {won} of {scenes} scenes ({won / scenes:.0%}) of {n_blocks} blocks",
+             f"the site was free at the start in {free} of {scenes}"
+             + (f"; built in {on_free:.0%} of those" if free else ""),
+             f"a scripted builder that first clears the site builds it in {sum(tried.scripted)} "
+             f"of {scenes} (it stands, and these scenes leave room to build it)"]
+    return "\n".join(lines)
+
+
+def parser():
+    p = Parser(prog="python -m taskexp_cli try",
+               description="A trained agent builds a structure you write, zero-shot, in a world "
+                           "of any number of blocks.",
+               epilog="structure: cells dx,layer separated by spaces (dx in block widths from "
+                      "the centre, a multiple of 0.25; layer 0 on the table), or I, Y or 3T")
+    p.add_argument("checkpoint", help="an agent checkpoint, e.g. runs/ours-seed0/round3.npz")
+    p.add_argument("structure", help='e.g. "0,0 0,1 1.5,0 1.5,1 0.75,2" (an arch), or 3T')
+    p.add_argument("--blocks", type=int, default=None,
+                   help=f"blocks in the world, 2..{MAX_BLOCKS} (default: the checkpoint's)")
+    p.add_argument("--scenes", type=int, default=50, help="fixed scenes to try (default 50)")
+    p.add_argument("--seed", type=int, default=0, help="seeds the scenes (default 0)")
+    p.add_argument("--steps", type=int, default=Config.max_steps,
+                   help=f"actions per scene (default {Config.max_steps})")
+    p.add_argument("--scene", type=int, default=0, help="the scene drawn (default 0, the first)")
+    p.add_argument("--out", default="tried.png", help="the drawing (default tried.png)")
+    p.add_argument("--gif", action="store_true", help="also an animated GIF next to it")
+    return p
+
+
+def main(argv=None):
+    p = parser()
+    a = p.parse_args(argv)
+    for name, low in (("scenes", 1), ("steps", 1), ("seed", 0)):
+        if getattr(a, name) < low:
+            p.error(f"--{name} must be >= {low}, got {getattr(a, name)}")
+    if not 0 <= a.scene < a.scenes:
+        p.error(f"--scene must be in 0..{a.scenes - 1}, got {a.scene}")
+    try:
+        agent = Agent.load(a.checkpoint)
+    except ValueError as e:
+        p.error(str(e).splitlines()[0])
+    n = agent.n_blocks if a.blocks is None else a.blocks
+    agent.worlds_told.add(n)                                 # said here, in plain words
+    print(f"{a.checkpoint}: learnt in a world of {agent.n_blocks} blocks, tried in one of {n}"
+          + (" (the same weights)" if n != agent.n_blocks else ""))
+    try:
+        with one_blas_thread():
+            tried = try_structure(agent, a.structure, n, a.scenes, a.seed, a.steps)
+    except ValueError as e:
+        p.error(str(e))
+    print(summary(tried, n))
+    episode = tried.episodes[a.scene]
+    attempt_figure(episode).savefig(a.out, dpi=100)
+    print(f"drew scene {a.scene} ({'built' if episode.success else 'not built'}, "
+          f"{len(episode.actions)} actions): {a.out}")
+    if a.gif:
+        gif = os.path.splitext(a.out)[0] + ".gif"
+        with open(gif, "wb") as f:
+            f.write(animate(episode.states, episode.goals, frame_titles(episode), fps=1.5,
+                            dpi=80))
+        print("and", gif)

@@ -1,0 +1,211 @@
+"""Tests of a structure a person writes (shapes.read_structure), of the agent in worlds of other
+block counts with the weights it learnt in one, and of `python -m taskexp_cli try`."""
+import os
+import warnings
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import taskexp_cli as cli
+from agent import Agent, OtherWorldWarning
+from env2d import BlockWorld, physics_pool, run_worlds
+from taskexp_cli.report import blocks_table
+from taskexp_lib import shapes
+from taskexp_lib.config import Config
+from taskexp_lib.features import featurize
+from taskexp_lib.geometry import BLOCK_H, BLOCK_W, layer_y, observation
+from taskexp_lib.rollout import run_episodes
+
+ARCH = "0,0 0,1 1.5,0 1.5,1 0.75,2"           # two towers of two and a block across them
+
+
+def test_a_written_structure_reads_as_cells_and_a_name_as_its_shape():
+    assert shapes.read_structure(ARCH) == [(0, 0), (0, 1), (1.5, 0), (1.5, 1), (0.75, 2)]
+    assert shapes.read_structure(" 0,0;0,1  ") == [(0, 0), (0, 1)]
+    assert shapes.read_structure("3T", 6) == shapes.SHAPES["3T"]
+    assert shapes.read_structure("0,2", 3) == [(0, 2)]           # in the air, on two supports
+
+
+@pytest.mark.parametrize("text, n_blocks, says", [
+    ("", 8, "no cells"),
+    ("0,0 x,1", 8, "cell 'x,1': write cells as dx,layer"),
+    ("0,0,0", 8, "write cells as dx,layer"),
+    ("0.3,0", 8, "multiple of 0.25"),
+    ("nan,0", 8, "finite"),
+    ("0,inf", 8, "finite"),
+    ("0,1.5", 8, "whole number"),
+    ("0,-1", 8, "whole number"),
+    ("0,0 0.75,0", 8, "cells 0,0 and 0.75,0 overlap"),
+    ("-4.5,0 4.75,0", 8, "9.25 block widths apart; the action grid spans 9"),
+    ("0,0 0,1 0,2 0,3 0,4 0,5 0,6", 6, "needs 7 blocks (7 with goals, 0 under"),
+    ("0,3", 3, "needs 4 blocks (1 with goals, 3 under goals in the air); the world has 3"),
+])
+def test_what_cannot_be_built_is_refused_in_one_line(text, n_blocks, says):
+    with pytest.raises(ValueError) as e:
+        shapes.read_structure(text, n_blocks)
+    assert says in str(e.value) and "\n" not in str(e.value), str(e.value)
+
+
+def test_a_lopsided_structure_is_placed_on_the_grid_at_every_spot_it_fits():
+    env, rng = BlockWorld(2), np.random.default_rng(0)
+    xs = np.array([[x for x, _ in shapes.place_cells([(0, 0), (8, 0)], env, rng).values()]
+                   for _ in range(200)])
+    assert xs.min() >= env.x_bins[0] - 1e-9 and xs.max() <= env.x_bins[-1] + 1e-9
+    assert np.isclose(xs.min(), env.x_bins[0]) and np.isclose(xs.max(), env.x_bins[-1])
+
+
+def test_a_site_is_free_unless_a_block_stands_where_the_structure_needs_the_ground():
+    env = BlockWorld(4)
+    goals = {0: (0.0, layer_y(0)), 1: (0.0, layer_y(1)), 2: (0.3, layer_y(1))}  # 2 needs support
+    state = np.zeros((4, 6))
+    state[:, 0], state[:, 1] = [-0.4, -0.25, -0.1 - 1e-3, 0.4], BLOCK_H / 2
+    assert shapes.site_free(state, goals)
+    state[3, 0] = 0.3 + 0.9 * BLOCK_W                  # on the ground under block 2's goal
+    assert not shapes.site_free(state, goals)
+    state[3, 0], state[0, 0] = 0.4, 0.0                # block 0 at its own goal: it may stay
+    assert shapes.site_free(state, goals)
+    state[1, :2] = 0.05, BLOCK_H / 2                   # a goal block on another goal's spot
+    assert not shapes.site_free(state, goals)
+    s0 = shapes.start_state(env, goals, np.random.default_rng(1))    # room: scattered off it
+    assert shapes.site_free(s0, goals)
+
+
+def obs_in(n_blocks, seed=0):
+    env = BlockWorld(n_blocks, drop=True)
+    goals = shapes.place_cells([(0, 0), (0, 1)], env, np.random.default_rng(seed))
+    return observation(shapes.start_state(env, goals, np.random.default_rng(seed)), goals)
+
+
+def test_the_agent_acts_and_values_in_any_world_with_the_weights_it_learnt_and_says_so():
+    agent = Agent(6, seed=3, dtype="float64")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                 # its own world: nothing to say
+        agent.act(obs_in(6), deterministic=True)
+    for n in (2, 7, 8):
+        with pytest.warns(OtherWorldWarning, match=f"learnt in a world of 6 blocks; it acts in "
+                                                   f"one of {n}"):
+            a = agent.act(obs_in(n), deterministic=True)
+        assert 0 <= a[0] < n and np.isfinite(agent.value(obs_in(n)))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")             # once per count
+            agent.act(obs_in(n, seed=1))
+    for bad in (np.zeros((1, 1, 6)), np.zeros((1, 9, 6)), np.zeros((1, 6, 5))):
+        with pytest.raises(ValueError, match=r"with n in 2\.\.8 blocks"):
+            agent.act(bad)
+
+
+def test_a_blocks_features_do_not_depend_on_how_many_blocks_the_world_has():
+    """The features of a block are its own (plain): the same in a world of 6 and of 8, scaled by
+    the layers of the world the agent learnt in, whatever the world it acts in."""
+    agent = Agent(6, dtype="float64")
+    obs8 = obs_in(8)
+    agent.worlds_told.add(8)
+    assert np.array_equal(agent.features(obs8[None])[0, :6], agent.features(obs8[None, :6])[0])
+    assert np.array_equal(agent.features(obs8[None]), featurize(obs8[None], 6, "plain"))
+
+
+def test_an_agent_that_places_picks_only_the_layers_a_world_has():
+    agent = Agent(6, n_y=6, seed=1)
+    agent.worlds_told.update((3, 8))
+    for n in (3, 8):
+        obs = np.repeat(obs_in(n)[None], 500, axis=0)
+        layers = agent.act(obs, rng=np.random.default_rng(0))[:, 2]
+        assert layers.max() < min(n, 6) and len(set(layers)) == min(n, 6)
+
+
+def test_physics_workers_run_worlds_of_any_block_count_with_the_same_results():
+    agent, cfg = Agent(6, seed=2), Config(n_envs=4, n_blocks=7)
+    agent.worlds_told.add(7)
+    tasks = shapes.eval_tasks(Config(eval_episodes=3, shapes=("I",)),
+                              BlockWorld(7, drop=True))["I"]
+    alone = run_episodes(agent, tasks, run_worlds(cfg)[0], deterministic=True)
+    with physics_pool(2, drop=True) as pool:
+        shared = run_episodes(agent, tasks, run_worlds(cfg, pool)[0], deterministic=True)
+        six = shapes.eval_tasks(Config(eval_episodes=2), BlockWorld(6, drop=True))["Y"]
+        run_episodes(agent, six, run_worlds(Config(n_envs=4), pool)[0], deterministic=True)
+    assert all(np.array_equal(a.states, b.states) for a, b in zip(alone, shared))
+
+
+def test_the_blocks_table_reports_other_worlds_beside_the_runs_own():
+    results = {"config": {"n_blocks": 6}, "rounds": [
+        {"round": 0, "eval": {"I": 0.5, "Y": 0.25}, "blocks": {"7": {"I": 0.25, "Y": 0.0}}}]}
+    table = blocks_table(results).splitlines()
+    assert "the weights learnt with 6" in table[0]
+    assert table[3:] == ["| 0 | 6 | 50% | 25% |", "| 0 | 7 | 25% | 0% |"]
+    del results["rounds"][0]["blocks"]                 # a run made before: no table
+    assert blocks_table(results) == ""
+
+
+@pytest.fixture(scope="module")
+def checkpoint(tmp_path_factory):
+    path = str(tmp_path_factory.mktemp("agent") / "round0.npz")
+    Agent(6, seed=0).save(path)
+    return path
+
+
+def test_try_builds_a_written_structure_in_another_world_and_draws_the_attempt(
+        checkpoint, tmp_path, capsys):
+    out = str(tmp_path / "arch.png")
+    cli.main(["try", checkpoint, ARCH, "--blocks", "7", "--scenes", "3", "--out", out, "--gif"])
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].endswith("learnt in a world of 6 blocks, tried in one of 7 (the same "
+                               "weights)")
+    assert printed[1].startswith("built in ") and printed[1].endswith("of 3 scenes (0%) of 7 "
+                                                                      "blocks"), printed
+    assert "the site was free at the start in" in printed[2]
+    assert "a scripted builder that first clears the site builds it in 3 of 3" in printed[3]
+    assert Image.open(out).format == "PNG"
+    gif = Image.open(str(tmp_path / "arch.gif"))
+    assert gif.format == "GIF" and gif.n_frames == 11           # the start and 10 actions
+
+
+@pytest.mark.parametrize("args, says", [
+    (["0,0 0.5,0"], "cells 0,0 and 0.5,0 overlap"),
+    (["3T", "--blocks", "5"], "needs 6 blocks"),
+    (["I", "--blocks", "9"], "a world holds 2..8, got 9"),
+    (["I", "--scenes", "0"], "--scenes must be >= 1"),
+    (["I", "--scene", "5", "--scenes", "5"], "--scene must be in 0..4"),
+])
+def test_try_refuses_in_one_line(checkpoint, args, says, capsys):
+    with pytest.raises(SystemExit) as e:
+        cli.main(["try", checkpoint, *args])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and says in err and err.count("\n") == 1, err
+
+
+def test_try_refuses_what_is_no_checkpoint_in_one_line(tmp_path, capsys):
+    for path in (str(tmp_path / "missing.npz"), os.devnull):
+        with pytest.raises(SystemExit):
+            cli.main(["try", path, "I"])
+        err = capsys.readouterr().err
+        assert "error:" in err and err.count("\n") == 1, err
+
+
+def test_eval_blocks_flag_takes_counts_none_or_refuses():
+    assert cli.parse_args(["--eval-blocks", "7"]).cfg.eval_blocks == (7,)
+    assert cli.parse_args(["--eval-blocks"]).cfg.eval_blocks == ()
+    assert Config().eval_blocks == (7, 8)
+    with pytest.raises(SystemExit):
+        cli.parse_args(["--eval-blocks", "5"])          # "3T" needs 6
+    assert "block counts in 6..8" in cli.problem(Config(eval_blocks=(9,)))
+
+
+def test_the_bench_splits_success_by_whether_the_site_was_free():
+    """lab/bench/more_blocks.py: success as the run's evaluation counts it, split by
+    shapes.site_free (8 blocks: the wide shapes' sites are seldom free)."""
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "lab", "bench"))
+    import more_blocks
+
+    from taskexp import evaluate
+    agent, cfg = Agent(6, hidden=16, seed=0), Config(eval_episodes=4, n_envs=4)
+    agent.worlds_told.add(8)
+    worlds = run_worlds(Config(n_blocks=8, n_envs=4))[0]
+    tasks = shapes.eval_tasks(cfg, worlds[0])
+    split, rates = more_blocks.split_by_site(agent, tasks, worlds), evaluate(agent, tasks, worlds)
+    for shape, (won, free, on_free, on_busy) in split.items():
+        share = np.mean([shapes.site_free(s0, goals) for s0, goals in tasks[shape]])
+        assert won == f"{100 * rates[shape]:.0f}%" and free == f"{100 * share:.0f}%"
+        assert (on_free == "-") == (share == 0) and (on_busy == "-") == (share == 1)
