@@ -2,6 +2,7 @@
 
     python lab/bench/bench_speed.py                 # everything (20-30 min on 2 cores; alone)
     python lab/bench/bench_speed.py --skip-full     # without the timed default run (~4 min)
+    python lab/bench/bench_speed.py --full-only --out runs/timed    # the default run by phase
     python lab/bench/bench_speed.py --hidden 64     # all of it for networks of another width
 
 Prints:
@@ -351,6 +352,9 @@ def env_throughput(n_blocks):
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--skip-full", action="store_true", help="skip the timed default run")
+    p.add_argument("--full-only", action="store_true", help="the timed default run alone (1.)")
+    p.add_argument("--out", default=None,
+                   help="keep the timed default run here (to compare it with another run)")
     p.add_argument("--hidden", type=int, default=Config.hidden,
                    help=f"the networks' width (default {Config.hidden}, Config's)")
     a = p.parse_args()
@@ -359,7 +363,7 @@ def main():
           f"features, {cfg.hidden} wide, networks in {cfg.dtype}); {workers} cores")
     with tempfile.TemporaryDirectory() as tmp:
         if not a.skip_full:
-            out = os.path.join(tmp, "full")
+            out = a.out or os.path.join(tmp, "full")
             counted, physics = Flops(), children_cpu()
             try:
                 (total, per_round, cpu), spent, actions = by_phase(cfg, workers, out, counted)
@@ -394,6 +398,8 @@ def main():
                   f"workers used {physics:.0f} s of CPU. With nothing else to do and both kept "
                   f"busy, {workers} cores need {least:.0f} s: the run took {total / least:.2f}x "
                   "that")
+        if a.full_only:
+            return
         small = cli.parse_args(["--rounds", "1", "--scale", "0.25", "--hidden", str(cfg.hidden),
                                 "--out", "unused"]).cfg
         total, spent = shares(small, os.path.join(tmp, "shares"))
