@@ -160,6 +160,19 @@ def test_try_builds_a_written_structure_in_another_world_and_draws_the_attempt(
     assert gif.format == "GIF" and gif.n_frames == 11           # the start and 10 actions
 
 
+def test_try_says_when_even_the_scripted_builder_cannot_build_it():
+    """A staircase whose top two blocks overhang the bottom one by more than half falls: the
+    summary does not claim that the structure stands."""
+    from taskexp_cli.try_structure import summary, try_structure
+    agent = Agent(6, hidden=16, seed=0)
+    tried = try_structure(agent, "0,0 0.75,1 1.5,2", scenes=2)
+    assert not any(tried.scripted)
+    assert summary(tried).splitlines()[2].endswith("builds it in 0 of 2 (where it does not, the "
+                                                   "structure falls or the table leaves no room)")
+    with pytest.raises(ValueError, match="scenes: at least 1"):
+        try_structure(agent, "0,0", scenes=0)
+
+
 @pytest.mark.parametrize("args, says", [
     (["0,0 0.5,0"], "cells 0,0 and 0.5,0 overlap"),
     (["3T", "--blocks", "5"], "needs 6 blocks"),

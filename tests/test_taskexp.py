@@ -144,6 +144,10 @@ def test_cli_end_to_end_tiny_budget(tmp_path, capsys):
     assert "Zero-shot success, blocked" in printed and "| 1 up | 2 up |" in printed
     assert "worlds of other block counts (the weights learnt with 6)" in printed
     assert "  8 blocks, the weights learnt with 6: I " in printed            # each round's log
+    drawn = str(tmp_path / "tried.png")                # after the run: a structure of one's own
+    cli.main(["try", os.path.join(out, "round1.npz"), "0,0 0,1 1.5,0 1.5,1 0.75,2", "--blocks",
+              "7", "--scenes", "2", "--out", drawn])
+    assert "of 2 scenes" in capsys.readouterr().out and os.path.exists(drawn)
     assert os.path.exists(os.path.join(out, "fig1_max_goal_height.png"))
 
 
