@@ -131,6 +131,22 @@ def test_results_md_is_what_the_kept_runs_say(tmp_path):
     assert committed[0] == again[0] and committed[3:] == again[3:]
 
 
+def test_the_readme_times_are_what_times_json_says():
+    """The README's times for the smoke test, the default run and the tests come from
+    lab/results/times.json (lab/bench/times.py), all three measured with one commit on one
+    machine: edit one in the README, and this fails."""
+    import times
+    measured = times.load()
+    assert {w: measured[w]["command"] for w in times.COMMANDS} == {
+        w: " ".join(c) for w, c in times.COMMANDS.items()}
+    assert len({(measured[w]["commit"], measured[w]["machine"]) for w in times.COMMANDS}) == 1
+    lines = times.readme_lines(measured)
+    assert times.readme_block(os.path.join(ROOT, "README.md")) == lines
+    assert f"about {times.minutes(measured['default']['seconds'])} on 2 cores" in lines[2]
+    edited = dict(measured, smoke=dict(measured["smoke"], seconds=1))
+    assert times.readme_lines(edited) != lines
+
+
 def test_what_the_readme_quotes_from_results_md_is_in_it():
     """The README's paragraph on the full report quotes RESULTS.md: each figure must be there."""
     with open(os.path.join(ROOT, "README.md")) as f:

@@ -79,8 +79,8 @@ def readme_lines(times):
             f"{t['tests']}",
             "",
             f"The times were measured with the code they describe (main {commit}), each alone, "
-            f"on {where} ({date}). Machines here differ: "
-            f"{SLOWER['what']} took {slower:.1f}x as long on a slower one "
+            f"on {where} ({date}).",
+            f"Machines here differ: {SLOWER['what']} took {slower:.1f}x as long on a slower one "
             f"({SLOWER['slow_s']} s against {SLOWER['fast_s']} s)."]
 
 
