@@ -222,3 +222,27 @@ def test_the_bench_splits_success_by_whether_the_site_was_free():
         share = np.mean([shapes.site_free(s0, goals) for s0, goals in tasks[shape]])
         assert won == f"{100 * rates[shape]:.0f}%" and free == f"{100 * share:.0f}%"
         assert (on_free == "-") == (share == 0) and (on_busy == "-") == (share == 1)
+
+
+def test_record_gives_a_run_made_before_the_figures_its_own_run_would_have(tmp_path):
+    """lab/bench/more_blocks.py --record, on a run whose results.json lacks the other worlds (as
+    runs made before eval_blocks do): it writes what taskexp.train wrote, to the byte."""
+    import json
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "lab", "bench"))
+    import more_blocks
+    out = str(tmp_path / "run")
+    cli.main(["--rounds", "0", "--scale", "0.02", "--label-epochs", "3", "--out", out])
+    path = os.path.join(out, "results.json")
+    with open(path) as f:
+        made = f.read()
+    before = json.loads(made)
+    del before["config"]["eval_blocks"]
+    for rnd in before["rounds"]:
+        del rnd["blocks"]
+    with open(path, "w") as f:
+        json.dump(before, f, indent=1)
+    more_blocks.record(out, workers=1)
+    with open(path) as f:
+        assert f.read() == made
