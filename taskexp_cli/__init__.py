@@ -30,6 +30,7 @@ from taskexp import RunState
 from taskexp_lib.checkpoint import load_state, save_json, save_state, saved_results
 from taskexp_lib.config import TUPLES, Config, saved_config
 from taskexp_lib.features import FEATURES
+from taskexp_lib.geometry import MAX_BLOCKS
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.shapes import FAMILIES, SHAPES
 
@@ -138,12 +139,13 @@ def parser():
 def problem(cfg):
     """The first setting of cfg that no run can use, as a one-line reason, or None."""
     need = max(len(SHAPES[s]) for s in cfg.shapes)
-    if not need <= cfg.n_blocks <= 8:
-        return (f"--blocks must be in {need}..8 (the held-out shapes need {need} blocks, the table "
-                f"holds 8), got {cfg.n_blocks}")
-    if any(not need <= n <= 8 for n in cfg.eval_blocks):
-        return (f"--eval-blocks must be block counts in {need}..8 (the held-out shapes need {need} "
-                f"blocks, the table holds 8), got {' '.join(map(str, cfg.eval_blocks))}")
+    top = MAX_BLOCKS
+    if not need <= cfg.n_blocks <= top:
+        return (f"--blocks must be in {need}..{top} (the held-out shapes need {need} blocks, the "
+                f"table holds {top}), got {cfg.n_blocks}")
+    if any(not need <= n <= top for n in cfg.eval_blocks):
+        return (f"--eval-blocks must be block counts in {need}..{top} (the held-out shapes need "
+                f"{need} blocks, the table holds {top}), got {' '.join(map(str, cfg.eval_blocks))}")
     for f in fields(Config):
         v = getattr(cfg, f.name)
         if f.type in (int, float):

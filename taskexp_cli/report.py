@@ -35,6 +35,12 @@ def family_tables(results):
     return "\n".join(out[1:])
 
 
+def rates_by_blocks(record, n_blocks):
+    """{block count (str): {shape: success}} of one round's record: the run's own world of
+    n_blocks ("eval") and the other worlds it measured ("blocks", none for a run made before)."""
+    return {str(n_blocks): record["eval"], **record.get("blocks", {})}
+
+
 def blocks_table(results):
     """Not in the paper: zero-shot success on the held-out shapes in worlds of other block counts,
     with the weights learnt in the run's own, beside it, round by round ("" for a run made before
@@ -47,7 +53,7 @@ def blocks_table(results):
     out = [f"Zero-shot success in worlds of other block counts (the weights learnt with {n})",
            "| round | blocks | " + " | ".join(shapes) + " |", "|---" * (len(shapes) + 2) + "|"]
     for r in rounds:
-        for count, rates in [(str(n), r["eval"]), *r.get("blocks", {}).items()]:
+        for count, rates in rates_by_blocks(r, n).items():
             out.append(f"| {r['round']} | {count} | "
                        + " | ".join(f"{100 * rates[s]:.0f}%" for s in shapes) + " |")
     return "\n".join(out)

@@ -192,22 +192,23 @@ def ablations(by_variant):
     return out
 
 
-def write_readme(path, lines):
-    """Replace the block between BEGIN and END in the README (or notes) at `path` by `lines`."""
+def write_readme(path, lines, begin=BEGIN, end=END):
+    """Replace the block between the markers begin and end (the headline's, or another
+    generated block's: lab/bench/times.py) in the README (or notes) at `path` by `lines`."""
     with open(path) as f:
         text = f.read()
-    if BEGIN not in text or END not in text:
-        raise SystemExit(f"{path} has no headline markers ({BEGIN} ... {END})")
-    head, rest = text.split(BEGIN, 1)
+    if begin not in text or end not in text:
+        raise SystemExit(f"{path} has no markers ({begin} ... {end})")
+    head, rest = text.split(begin, 1)
     with open(path, "w") as f:
-        f.write(head + "\n".join([BEGIN, "", *lines, "", END]) + rest.split(END, 1)[1])
+        f.write(head + "\n".join([begin, "", *lines, "", end]) + rest.split(end, 1)[1])
 
 
-def readme_block(path):
+def readme_block(path, begin=BEGIN, end=END):
     """The lines between the markers of the README at `path` (what write_readme wrote)."""
     with open(path) as f:
         text = f.read()
-    return text.split(BEGIN, 1)[1].split(END, 1)[0].strip("\n").split("\n")
+    return text.split(begin, 1)[1].split(end, 1)[0].strip("\n").split("\n")
 
 
 def main():

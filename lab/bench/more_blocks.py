@@ -43,6 +43,12 @@ def split_by_site(agent, tasks, worlds):
     return out
 
 
+def world_of(cfg, n, pool=None):
+    """The worlds of n blocks and their fixed evaluation scenes, as taskexp.train makes them."""
+    worlds = run_worlds(replace(cfg, n_blocks=n), pool)[0]
+    return worlds, eval_tasks(cfg, worlds[0])
+
+
 def record(run, workers=2):
     """Each round's success in the worlds of cfg.eval_blocks, into the run's results.json, where
     and as taskexp.train records it (rounds[k]["blocks"], after "families")."""
@@ -51,13 +57,12 @@ def record(run, workers=2):
         results = json.load(f)
     cfg = saved_config(results["config"])              # a run made before: Config's eval_blocks
     with physics_pool(workers, cfg.action == "drop") as pool:
+        others = {str(n): world_of(cfg, n, pool) for n in cfg.eval_blocks}    # once, every round
         for k, rnd in enumerate(results["rounds"]):
             agent = Agent.load(os.path.join(run, f"round{k}.npz"))
             agent.worlds_told.update(cfg.eval_blocks)
-            blocks = {}
-            for n in cfg.eval_blocks:
-                worlds = run_worlds(replace(cfg, n_blocks=n), pool)[0]
-                blocks[str(n)] = taskexp.evaluate(agent, eval_tasks(cfg, worlds[0]), worlds)
+            blocks = {n: taskexp.evaluate(agent, tasks, worlds)
+                      for n, (worlds, tasks) in others.items()}
             first = {key: rnd.pop(key) for key in ("round", "eval", "families") if key in rnd}
             results["rounds"][k] = {**first, "blocks": blocks, **rnd}
             print(f"round {k}: " + "; ".join(f"{n} blocks " + ", ".join(
@@ -89,8 +94,7 @@ def main():
     print("|---|---|---|---|---|---|")
     warnings.simplefilter("ignore", OtherWorldWarning)            # the table says so
     for n in counts:                                # the run's own world the same way
-        worlds = run_worlds(replace(cfg, n_blocks=n))[0]
-        tasks = eval_tasks(cfg, worlds[0])
+        worlds, tasks = world_of(cfg, n)
         for shape, (won, free, on_free, on_busy) in split_by_site(agent, tasks, worlds).items():
             print(f"| {n} | {shape} | {won} | {free} | {on_free} | {on_busy} |")
 

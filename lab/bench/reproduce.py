@@ -39,7 +39,13 @@ from run_seeds import KEPT, kept_name, load, pm, run_dir, run_one, split_argv  #
 LAB = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))     # lab/: the report, notes
 
 from env2d import BlockWorld  # noqa: E402
-from taskexp_cli.report import DPI, FAMILY_TITLES, FIGURES, histogram_figure  # noqa: E402
+from taskexp_cli.report import (  # noqa: E402
+    DPI,
+    FAMILY_TITLES,
+    FIGURES,
+    histogram_figure,
+    rates_by_blocks,
+)
 from taskexp_lib.config import Config, saved_config  # noqa: E402
 from taskexp_lib.shapes import eval_tasks, site_free  # noqa: E402
 
@@ -91,8 +97,7 @@ def blocks_success(run, k, n, shape=None):
     """Zero-shot success (%) after round k in the world of n blocks (the run's own, or one of
     cfg.eval_blocks, with the same weights): one shape, or the mean over the shapes; None for a
     run that did not measure n."""
-    rates = run["rounds"][k]["eval"] if n == run["config"]["n_blocks"] else \
-        run["rounds"][k].get("blocks", {}).get(str(n))
+    rates = rates_by_blocks(run["rounds"][k], run["config"]["n_blocks"]).get(str(n))
     if rates is None:
         return None
     return 100 * (rates[shape] if shape else float(np.mean(list(rates.values()))))

@@ -20,6 +20,7 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from headline import write_readme  # noqa: E402
 from reproduce import machine  # noqa: E402
 
 ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".."))
@@ -84,13 +85,6 @@ def readme_lines(times):
             f"({SLOWER['slow_s']} s against {SLOWER['fast_s']} s)."]
 
 
-def readme_block(path):
-    """The lines between the README's markers."""
-    with open(path) as f:
-        text = f.read()
-    return text.split(BEGIN + "\n", 1)[1].split("\n" + END, 1)[0].split("\n")
-
-
 def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--measure", nargs="+", choices=tuple(COMMANDS), default=[])
@@ -110,12 +104,7 @@ def main():
         with open(TIMES, "w") as f:
             json.dump(times, f, indent=1)
     if a.readme:
-        with open(a.readme) as f:
-            text = f.read()
-        head, rest = text.split(BEGIN + "\n", 1)
-        tail = rest.split("\n" + END, 1)[1]
-        with open(a.readme, "w") as f:
-            f.write(head + BEGIN + "\n" + "\n".join(readme_lines(load())) + "\n" + END + tail)
+        write_readme(a.readme, readme_lines(load()), BEGIN, END)
         print("wrote the times into", a.readme)
 
 
