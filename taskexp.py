@@ -367,11 +367,11 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
     new_obs, new_act = demo_arrays(learnt_from(demos))
     run.buffer_obs = np.concatenate([run.buffer_obs, new_obs])[-cfg.buffer_size:]
     run.buffer_act = np.concatenate([run.buffer_act, new_act])[-cfg.buffer_size:]
-    bc_loss = agent.bc(run.buffer_obs, run.buffer_act, cfg.bc_epochs, cfg.bc_batch, cfg.bc_lr, rng,
+    epochs = cfg.distill_epochs[min(run.last_round, len(cfg.distill_epochs) - 1)]    # round k's
+    bc_loss = agent.bc(run.buffer_obs, run.buffer_act, epochs, cfg.bc_batch, cfg.bc_lr, rng,
                        bar=bar)
     log(f"  BC on {len(run.buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
-    task = lambda d: (d.states[0].copy(), d.goals)                # a copy: not the whole episode
-    new_tasks = [task(t) for d in demos for t in (d, *d.parts)]
+    new_tasks = [(t.states[0].copy(), t.goals) for d in demos for t in (d, *d.parts)]  # s0 copied
     old = [run.all_tasks[i] for i in rng.integers(len(run.all_tasks), size=len(new_tasks))]
     ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short_envs, rng, "PPO distil",
                         pieces=pieces, bar=bar)

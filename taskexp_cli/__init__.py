@@ -114,6 +114,8 @@ def parser():
             kw["action"] = argparse.BooleanOptionalAction
         elif f.name == "eval_blocks":                      # block counts; none is allowed
             kw["nargs"], kw["type"] = "*", int
+        elif f.name == "distill_epochs":                   # epochs, round by round
+            kw["nargs"], kw["type"] = "+", int
         elif f.type is tuple:
             kw["nargs"] = "+"
         else:
@@ -146,6 +148,9 @@ def problem(cfg):
     if any(not need <= n <= top for n in cfg.eval_blocks):
         return (f"--eval-blocks must be block counts in {need}..{top} (the held-out shapes need "
                 f"{need} blocks, the table holds {top}), got {' '.join(map(str, cfg.eval_blocks))}")
+    if not cfg.distill_epochs or min(cfg.distill_epochs) < 1:
+        return (f"--distill-epochs must be epochs >= 1, round by round, got "
+                f"{' '.join(map(str, cfg.distill_epochs)) or 'none'}")
     for f in fields(Config):
         v = getattr(cfg, f.name)
         if f.type in (int, float):

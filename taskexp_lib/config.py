@@ -58,7 +58,12 @@ class Config:
     max_stay: int = 2
     """sec 4.1: up to this many "stay where you are" goals for other blocks in a base task"""
     bc_epochs: int = 8
-    """BC epochs over the demos (sec 4.1) and over the generated data (sec 4.3)"""
+    """BC epochs over the base demos (sec 4.1)"""
+    distill_epochs: tuple = (8,)
+    """sec 4.3: BC epochs over the buffer of generated data in rounds 1, 2, ..., the last value
+    for every round after; the policy goes on from the last round's weights. 4 in every round
+    took 0.86x the time and cost round 1 eight points of zero-shot success; 8 then 4 cost rounds
+    2 and 3 about seven each (lab/notes.md)"""
     bc_batch: int = 256
     """BC minibatch size"""
     bc_lr: float = 1e-3
@@ -154,12 +159,20 @@ class Config:
     after every round too, with the weights learnt in this one (none: --eval-blocks alone)"""
 
 
-TUPLES = ("shapes", "families", "eval_blocks")        # fields that results.json saves as lists
+# fields that results.json saves as lists
+TUPLES = ("shapes", "families", "eval_blocks", "distill_epochs")
+
+
+class SameAs(str):
+    """In ADDED: the field takes the value of the named field of the same run (as a tuple of
+    it, for a field of TUPLES)."""
+
 
 # Fields added since runs were first kept, each with the value that does what the code before it
 # did: a run saved without the field resumes with that value
 ADDED = {"other_orders": False,                                # 2026-12-04
          "goal_parts": 0, "base_pairs": 0,                       # 2026-12-06
+         "distill_epochs": SameAs("bc_epochs"),                  # 2026-12-07
          # evaluation only: a run made before learns the same, and is tried on them from its
          # next round on
          "families": ("blocked", "air"),
@@ -181,6 +194,9 @@ def upgraded(settings):
     field of REMOVED is dropped if it holds the value today's code runs (None: any value), and
     refused otherwise (RemovedSetting)."""
     settings = {**ADDED, **settings}
+    for name, v in ADDED.items():
+        if isinstance(settings[name], SameAs):
+            settings[name] = (settings[v],) if name in TUPLES else settings[v]
     for name, value in REMOVED.items():
         if name in settings and value is not None and settings[name] != value:
             raise RemovedSetting(f"made with {name}={settings[name]!r}, a setting this version "

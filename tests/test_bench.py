@@ -273,8 +273,8 @@ def test_a_branch_of_round_0_gives_the_bytes_of_a_run_made_with_its_settings(tmp
     later rounds and resumed, gives the round-1 checkpoint of a run made with them throughout.
     A setting that round 0 reads is refused."""
     tiny = ["--scale", "0.02", "--label-epochs", "6", "--expand-episodes", "3000"]
-    later = {"other_orders": False, "buffer_size": 1000}
-    flags = ["--no-other-orders", "--buffer-size", "1000"]
+    later = {"other_orders": False, "buffer_size": 1000, "distill_epochs": (1,)}
+    flags = ["--no-other-orders", "--buffer-size", "1000", "--distill-epochs", "1"]
     cli.main(["--rounds", "0", *tiny, "--out", str(tmp_path / "base")])
     branch.branch(str(tmp_path / "base"), str(tmp_path / "branch"), later)
     cli.main(["--resume", "--rounds", "1", "--out", str(tmp_path / "branch")])
@@ -283,8 +283,10 @@ def test_a_branch_of_round_0_gives_the_bytes_of_a_run_made_with_its_settings(tmp
         branched, direct = (tmp_path / d / name for d in ("branch", "direct"))
         assert branched.read_bytes() == direct.read_bytes(), name
     made = json.loads((tmp_path / "branch" / "results.json").read_text())
-    assert made["branched_from"] == dict(run=str(tmp_path / "base"), changes=later,
-                                         ablation=False)
+    assert made["branched_from"] == dict(run=str(tmp_path / "base"), ablation=False,
+                                         changes=json.loads(json.dumps(later)))   # tuples: lists
+    # BC over the base demos takes bc_epochs, over the generated data distill_epochs
+    assert [len(made["rounds"][k]["bc_loss"]) for k in (0, 1)] == [Config.bc_epochs, 1]
     with pytest.raises(SystemExit, match="--p-add: round 0 reads it"):
         branch.branch(str(tmp_path / "base"), str(tmp_path / "other"), {"p_add": 0.7}, True)
     with pytest.raises(SystemExit, match="--select: round 0 reads it"):

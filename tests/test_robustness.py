@@ -57,6 +57,7 @@ def child(*argv):
     (["--ppo-lr", "0"], "--ppo-lr must be > 0"),
     (["--max-stay", "6"], "--max-stay must be below --blocks"),
     (["--shapes", "O"], "invalid choice"),
+    (["--distill-epochs", "8", "0"], "--distill-epochs must be epochs >= 1"),
     (["--resume", "--out", "runs/x", "--ppo-steps", "9"], "drop --ppo-steps"),
 ])
 def test_cli_refuses_bad_arguments_in_one_line(argv, reason, capsys):
@@ -158,8 +159,9 @@ def test_killed_run_resumes_to_the_same_results(tmp_path, capsys):
     """SIGKILL in round 2 (after round 1 is saved), then --resume: results.json and every checkpoint
     equal those of a run never stopped."""
     whole, killed = str(tmp_path / "whole"), str(tmp_path / "killed")
-    cli.main(["--rounds", "3", *TINY, "--out", whole])
-    p = child("--rounds", "3", *TINY, "--out", killed)
+    distill = ["--distill-epochs", "3", "1"]            # round 1: 3 BC epochs, then 1 each round
+    cli.main(["--rounds", "3", *TINY, *distill, "--out", whole])
+    p = child("--rounds", "3", *TINY, *distill, "--out", killed)
     for line in p.stdout:
         if line.startswith("round 1:"):
             break
@@ -175,6 +177,10 @@ def test_killed_run_resumes_to_the_same_results(tmp_path, capsys):
     assert (f"resuming {killed} after round " in log and "[round 0]" not in log
             and "round 1:" not in log)
     assert results_without_clock(killed) == results_without_clock(whole)
+    # BC epochs: bc_epochs over the base demos, then distill_epochs round by round, the last
+    # value for every round after (also across the resume)
+    epochs = [len(r["bc_loss"]) for r in results_without_clock(killed)["rounds"]]
+    assert epochs == [taskexp.Config.bc_epochs, 3, 1, 1], epochs
     for k in range(4):
         with open(os.path.join(killed, f"round{k}.npz"), "rb") as a, \
                 open(os.path.join(whole, f"round{k}.npz"), "rb") as b:
@@ -206,16 +212,20 @@ def test_resume_can_add_rounds_and_refuses_other_settings(tmp_path, capsys):
 
 
 def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path, capsys):
-    """Settings saved before other_orders existed, and with fields removed since at the values
-    today's code runs (config.REMOVED), still resume (config.upgraded), to the results of a run
-    never stopped; a run that used a removed setting is refused in one line that names it."""
+    """Settings saved before other_orders and distill_epochs existed, and with fields removed
+    since at the values today's code runs (config.REMOVED), still resume (config.upgraded), to
+    the results of a run never stopped; a run that used a removed setting is refused in one line
+    that names it."""
     old, new = str(tmp_path / "old"), str(tmp_path / "new")
-    cli.main(["--rounds", "1", *TINY, "--no-other-orders", "--out", old])   # what the code did
+    # what the code did: no other orders, and one number of BC epochs for every round
+    before = ["--no-other-orders", "--bc-epochs", "3", "--distill-epochs", "3"]
+    cli.main(["--rounds", "1", *TINY, *before, "--out", old])
 
     def as_before(settings, **removed):            # the settings as the code before saved them
         settings = {**settings, "hard_picks": False, "label_later_tasks": 0,
                     "label_later_epochs": 30, **removed}
         assert settings.pop("other_orders") is False
+        assert settings.pop("distill_epochs") == [settings["bc_epochs"]] == [3]
         return settings
 
     def save_as_before(**removed):
@@ -232,7 +242,7 @@ def test_a_run_of_earlier_code_resumes_to_the_same_results(tmp_path, capsys):
 
     save_as_before()
     cli.main(["--resume", "--rounds", "2", "--out", old])
-    cli.main(["--rounds", "2", *TINY, "--no-other-orders", "--out", new])
+    cli.main(["--rounds", "2", *TINY, *before, "--out", new])
     assert results_without_clock(old) == results_without_clock(new)
     save_as_before(label_later_tasks=40)           # labels before every later round: gone
     capsys.readouterr()

@@ -41,13 +41,15 @@ def feasible(state, goals):
     return rel["needs_support"].max() == 0 and rel["blocked"].max() == 0
 
 
-def measure(checkpoint, tasks=600, seed=5, select="ours", restrict=True):
-    """The diagnostic for one checkpoint, picking by `select` among candidates drawn with or
-    without the restriction -> dict of the shares (0..1) and counts it prints."""
+def measure(checkpoint, tasks=600, seed=5, select="ours", restrict=True,
+            candidates=taskexp.Config.candidates):
+    """The diagnostic for one checkpoint, picking by `select` among K = `candidates` drawn with
+    or without the restriction -> dict of the shares (0..1) and counts it prints."""
     agent = Agent.load(checkpoint)
     drop = agent.drops
     cfg = taskexp.Config(features=agent.feature_set, network=agent.network,
-                         action="drop" if drop else "place", select=select, restrict=restrict)
+                         action="drop" if drop else "place", select=select, restrict=restrict,
+                         candidates=candidates)
     rng = np.random.default_rng(seed)
     envs, short = run_worlds(cfg)
     base, _, _ = taskexp.base_demos(cfg, envs[0], rng, tasks)
@@ -81,9 +83,11 @@ def main():
                    help="the selection rule: equation (1) or an ablation of Table 3")
     p.add_argument("--no-restrict", dest="restrict", action="store_false",
                    help="candidates without the one-alteration restriction (Table 3)")
+    p.add_argument("--candidates", type=int, default=taskexp.Config.candidates,
+                   help="K, the candidates drawn per success (default: the default's)")
     p.add_argument("--json", help="also write the figures to this file (lab/bench/reproduce.py)")
     a = p.parse_args()
-    m = measure(a.checkpoint, a.tasks, a.seed, a.select, a.restrict)
+    m = measure(a.checkpoint, a.tasks, a.seed, a.select, a.restrict, a.candidates)
     if a.json:
         with open(a.json, "w") as f:
             json.dump(m, f, indent=1)
