@@ -367,7 +367,7 @@ def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=sile
     new_obs, new_act = demo_arrays(learnt_from(demos))
     run.buffer_obs = np.concatenate([run.buffer_obs, new_obs])[-cfg.buffer_size:]
     run.buffer_act = np.concatenate([run.buffer_act, new_act])[-cfg.buffer_size:]
-    epochs = cfg.distill_epochs[min(run.last_round, len(cfg.distill_epochs) - 1)]    # round k's
+    epochs = cfg.distill_epochs[min(run.last_round, len(cfg.distill_epochs) - 1)]  # this round's
     bc_loss = agent.bc(run.buffer_obs, run.buffer_act, epochs, cfg.bc_batch, cfg.bc_lr, rng,
                        bar=bar)
     log(f"  BC on {len(run.buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")

@@ -29,7 +29,7 @@ sys.path[:0] = [BENCH, ROOT]
 import engine  # noqa: E402
 
 import taskexp_cli as cli  # noqa: E402
-from taskexp_lib.config import Config, upgraded  # noqa: E402
+from taskexp_lib.config import ADDED, REMOVED, Config  # noqa: E402
 
 FLAGS = {"ours": [], "direct-ppo": ["--baseline", "direct-ppo"], "end2new": ["--select", "end2new"],
          "init2new": ["--select", "init2new"], "no-restrict": ["--no-restrict"],
@@ -118,8 +118,9 @@ def load(name, kept=KEPT):
             runs.append(json.load(f))
     # a field added or removed since (config.ADDED, REMOVED) at the value today's code runs is
     # the same setting whether a run's results record it or not
-    configs = {json.dumps({k: v for k, v in upgraded(r["config"]).items() if k != "seed"},
-                          sort_keys=True) for r in runs}
+    same = lambda k, v: k in REMOVED and v == REMOVED[k]
+    configs = {json.dumps({k: v for k, v in {**ADDED, **r["config"]}.items()
+                           if k != "seed" and not same(k, v)}, sort_keys=True) for r in runs}
     if len(configs) > 1:
         raise ValueError(f"the kept {name} runs differ in more than their seed")
     return sorted(runs, key=lambda r: r["config"]["seed"])
