@@ -112,12 +112,9 @@ def parser():
         names = [flag(f.name)] + (["--n-blocks"] if f.name == "n_blocks" else [])
         if f.type is bool:
             kw["action"] = argparse.BooleanOptionalAction
-        elif f.name == "eval_blocks":                      # block counts; none is allowed
-            kw["nargs"], kw["type"] = "*", int
-        elif f.name == "distill_epochs":                   # epochs, round by round
-            kw["nargs"], kw["type"] = "+", int
-        elif f.type is tuple:
-            kw["nargs"] = "+"
+        elif f.type is tuple:                              # items of its default's type
+            kw["nargs"] = "*" if f.name == "eval_blocks" else "+"     # no other world: none
+            kw["type"] = type(default[0])
         else:
             kw["type"] = f.type
         if f.name in CHOICES:
