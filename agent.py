@@ -26,7 +26,7 @@ from tqdm import tqdm
 from taskexp_lib import checkpoint
 from taskexp_lib.config import Config
 from taskexp_lib.features import featurize
-from taskexp_lib.geometry import MAX_BLOCKS, N_X
+from taskexp_lib.geometry import N_X, block_count
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.nn import Adam, check_finite, clip_grad_norm, mlp_backward
 from taskexp_lib.shards import DataParallel
@@ -34,7 +34,6 @@ from taskexp_lib.shards import DataParallel
 
 class OtherWorldWarning(UserWarning):
     """An agent acts in a world of another number of blocks than it learnt in (Agent.features)."""
-
 
 # ---- The factorised action distribution (sec 3):  pi(b, x, y) = pi(b) pi(x | b) pi(y | b) ----
 
@@ -239,7 +238,6 @@ class Agent:
         self.actor_opt, self.critic_opt = Adam(self.actor.params), Adam(self.critic.params)
         self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
         self.threads = 1        # threads for a minibatch's parts (shards.py): same results for any
-        self.worlds_told = set()        # the other block counts it has said it acts in
 
     @property
     def drops(self):
@@ -252,17 +250,18 @@ class Agent:
         The agent learnt in a world of n_blocks blocks, and acts and values in one of any n in
         2..MAX_BLOCKS with the same weights: self-attention takes any number of block tokens,
         and heights are scaled by the n_blocks layers it learnt with, whatever the world. It says
-        so, once per n (OtherWorldWarning).
+        so with an OtherWorldWarning, which the warnings module shows once per n: by default it
+        shows a warning once per place and message, and this one is always raised from the same
+        line (until its filters change, as when a catch_warnings block ends). A caller that asked
+        for another world on purpose silences it with warnings.catch_warnings.
         """
         obs = np.asarray(obs, dtype=np.float64)
-        if obs.ndim != 3 or obs.shape[-1] != 6 or not 2 <= obs.shape[1] <= MAX_BLOCKS:
-            raise ValueError(f"obs must have shape (B, n, 6) with n in 2..{MAX_BLOCKS} blocks, "
-                             f"got {obs.shape}")
-        n = obs.shape[1]
-        if n != self.n_blocks and n not in self.worlds_told:
-            self.worlds_told.add(n)
+        if obs.ndim != 3 or obs.shape[-1] != 6:
+            raise ValueError(f"obs must have shape (B, n, 6), got {obs.shape}")
+        n = block_count(obs.shape[1], name="the blocks n of obs (B, n, 6)")
+        if n != self.n_blocks:     # raised from this line, whoever asks: once per n (docstring)
             warnings.warn(f"this agent learnt in a world of {self.n_blocks} blocks; it acts in "
-                          f"one of {n} with the same weights", OtherWorldWarning, stacklevel=3)
+                          f"one of {n} with the same weights", OtherWorldWarning)
         return featurize(obs, self.n_blocks, self.feature_set).astype(self.dtype, copy=False)
 
     def policy(self, f):

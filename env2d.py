@@ -32,12 +32,12 @@ from taskexp_lib.draw import draw_scene, rgb_array
 from taskexp_lib.geometry import (
     BLOCK_H,
     BLOCK_W,
-    MAX_BLOCKS,
     N_X,
     SAME_SPOT,
     TABLE_X,
     THRESHOLD,
     X_BINS,
+    block_count,
     is_success,
     layer_y,
     max_goal_y,
@@ -132,8 +132,7 @@ class BlockWorld(gymnasium.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(self, n_blocks=6, max_steps=10, render_mode=None, drop=False):
-        if not (isinstance(n_blocks, (int, np.integer)) and 2 <= n_blocks <= MAX_BLOCKS):
-            raise ValueError(f"n_blocks={n_blocks!r}: need an int in 2..{MAX_BLOCKS} (the table)")
+        n_blocks = block_count(n_blocks)                      # 2..MAX_BLOCKS: the table
         if not (isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool)
                 and max_steps >= 1):
             raise ValueError(f"max_steps={max_steps!r}: need an int >= 1 (actions per episode)")
@@ -141,7 +140,7 @@ class BlockWorld(gymnasium.Env):
             raise ValueError(f"render_mode={render_mode!r}: only None or 'rgb_array'")
         if not isinstance(drop, bool):
             raise ValueError(f"drop={drop!r}: need True (drop at an x) or False (place in a layer)")
-        self.n_blocks, self.max_steps, self.render_mode = int(n_blocks), int(max_steps), render_mode
+        self.n_blocks, self.max_steps, self.render_mode = n_blocks, int(max_steps), render_mode
         self.drop = drop
         self.table_x, self.threshold = TABLE_X, THRESHOLD
         self.x_bins = X_BINS.copy()

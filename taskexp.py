@@ -8,9 +8,13 @@
                            g* = argmax_g V(sT, g) - V(s0, g)   (equation 1),
                            run the policy from sT toward g*: join on success, relabel on failure
   sec 4.3  self_distill    BC on the generated demos, then PPO on the generated tasks
-  sec 5    evaluate        zero-shot success on held-out shapes ("I", "Y", "3T") after every round
-                           (and, not in the paper, in worlds of other block counts)
+  sec 5    evaluate        zero-shot success on held-out shapes ("I", "Y", "3T") after every round;
+                           zero_shot_tests names every test a round makes: the paper's, and
+                           beyond it the families of blocks no goal names and other block counts
            train           the loop that calls them in order: read it last
+
+Round 0 is base_skills; each round k >= 1 is task_expansion from the last round's tasks, then
+self_distill on what it generated; every round ends with the tests of zero_shot_tests.
 
 A task is a pair (s0, goals): a state array (n_blocks, 6) and a dict {block: (x, y)}.
 The hyperparameters are in taskexp_lib/config.py, the batched episodes in taskexp_lib/rollout.py;
@@ -22,24 +26,26 @@ in the package taskexp_cli. `python taskexp.py --rounds 3` runs taskexp_cli.main
 if __name__ == "__main__":
     from taskexp_cli import main
     raise SystemExit(main())
+import warnings
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import numpy as np
 from tqdm import tqdm
 
 import agent as agent_lib
-from agent import Agent
+from agent import Agent, OtherWorldWarning
 from env2d import drop_height, physics_pool, run_worlds
-from taskexp_lib import one_blas_thread, phase, rollout
+from taskexp_lib import one_blas_thread, rollout
 from taskexp_lib.config import Config  # noqa: F401  (re-exported: taskexp.Config, a run's settings)
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, N_X, is_success, layer, observation, on_same_spot
-from taskexp_lib.hindsight import learnt_from, pair_parts, part_demos
+from taskexp_lib.hindsight import add_parts, learnt_from
 from taskexp_lib.labels import labelled
 from taskexp_lib.nn import mlp_backward
 from taskexp_lib.orders import other_orders, with_other_orders
-from taskexp_lib.rollout import Trajectory, demo_arrays, run_episodes, success_rate
+from taskexp_lib.rollout import Trajectory, cut, run_episodes, success_rate
 from taskexp_lib.shapes import eval_tasks, family_tasks
 from taskexp_lib.shards import SHARDS, read_only_map
 from taskexp_lib.stats import order_stats, task_stats, unnamed_moves
@@ -50,6 +56,18 @@ silent = partial(tqdm, disable=True)     # the default progress bar: none (the C
 def on_table(state, env):
     """True when every block rests on the table (none fell off the edge)."""
     return bool(np.all(state[:, 1] > 0) and np.all(np.abs(state[:, 0]) < env.table_x[1]))
+
+
+@dataclass
+class RunState:
+    """What a run carries from one round to the next (checkpoint.py saves it as state.npz): the
+    base skills start it, each self-distillation adds to it."""
+    last_round: int = -1                # the last complete round; -1 before the base skills
+    buffer_obs: np.ndarray = None       # demo steps (N, n, 6) for BC, the newest buffer_size
+    buffer_act: np.ndarray = None       # their actions (N, 3)
+    all_tasks: list = None              # every task so far, newest buffer_size: PPO replays some
+    prev_tasks: list = None             # the tasks that the next task expansion starts from
+    results: dict = field(default_factory=dict)    # config, one record per round, wall-clock
 
 
 # --------------------------------------------------------------------------------------------
@@ -81,6 +99,23 @@ def random_move(env, rng, free_table=False):
     return b, env.encode_action(b, x, env.y_bins[k])
 
 
+def usable_moves(worlds, moves):
+    """The random moves [(k, (block, action) or None)] of worlds[k], at most one per world,
+    simulated side by side (in the physics workers, if the worlds have them) -> [(k, block,
+    action, s0, s1)] of those a demonstration can show: the block moved (else there is nothing
+    to learn), the scene came to rest, and no block fell off the table."""
+    moves = [(k, *move, worlds[k].get_state()) for k, move in moves if move is not None]
+    outcomes = rollout.simulate(worlds, [k for k, *_ in moves], [a for _, _, a, _ in moves])
+    usable = []
+    for (k, b, a, s0), outcome in zip(moves, outcomes):
+        env = worlds[k]
+        stable = env.finish_step(outcome)[-1]["stable"]
+        s1 = env.get_state()
+        if np.linalg.norm(s1[b, :2] - s0[b, :2]) >= env.threshold and stable and on_table(s1, env):
+            usable.append((k, b, a, s0, s1))
+    return usable
+
+
 def base_demos(cfg, envs, rng, count, bar=silent):
     """Single-step demonstrations (sec 4.1): one random block teleported somewhere it can rest.
 
@@ -91,7 +126,7 @@ def base_demos(cfg, envs, rng, count, bar=silent):
     the block came to rest, so every demo is correct by construction; up to cfg.max_stay "stay
     where you are" goals for other blocks make the goal count uniform in 1..max_stay + 1.
     envs: the worlds (rollout.Worlds, or one BlockWorld), each with a scene of its own; their
-    moves are simulated side by side (in the physics workers, if Worlds has them).
+    moves are simulated side by side (usable_moves).
     Returns (tasks, obs (count, n, 6), actions (count, 3)).
     """
     worlds = envs if isinstance(envs, list) else [envs]
@@ -100,24 +135,14 @@ def base_demos(cfg, envs, rng, count, bar=silent):
     moves_left = [0] * len(worlds)                   # of each world's scene; 0: a new scene
     with bar(total=count, desc="demos") as progress:
         while len(tasks) < count:
-            moves = []                               # (world, block, action, state before)
+            moves = []                               # (world, its move)
             for k, env in enumerate(worlds):
                 if moves_left[k] == 0 or not on_table(env.get_state(), env):   # or one fell off
                     env.reset(seed=int(rng.integers(2**31)))
                     moves_left[k] = cfg.warmup + 1
                 moves_left[k] -= 1
-                move = random_move(env, rng, cfg.free_table)
-                if move is not None:
-                    moves.append((k, *move, env.get_state()))
-            outcomes = rollout.simulate(worlds, [k for k, *_ in moves], [a for _, _, a, _ in moves])
-            for (k, b, a, s0), outcome in zip(moves, outcomes):
-                env = worlds[k]
-                _, _, _, _, info = env.finish_step(outcome)
-                s1 = env.get_state()
-                if info["noop"] or not info["stable"] or not on_table(s1, env):
-                    continue
-                if np.linalg.norm(s1[b, :2] - s0[b, :2]) < env.threshold:
-                    continue                                 # nothing moved: nothing to learn
+                moves.append((k, random_move(env, rng, cfg.free_table)))
+            for _, b, a, s0, s1 in usable_moves(worlds, moves)[: count - len(tasks)]:
                 others = [int(i) for i in rng.permutation([i for i in range(n) if i != b])]
                 stay = others[: int(rng.integers(0, cfg.max_stay + 1))]
                 goals = {i: (float(s1[i, 0]), float(s1[i, 1])) for i in [b] + stay}
@@ -125,9 +150,38 @@ def base_demos(cfg, envs, rng, count, bar=silent):
                 obs.append(observation(s0, goals))
                 actions.append(a)
                 progress.update(1)
-                if len(tasks) == count:
-                    break
     return tasks, np.stack(obs), np.stack(actions)
+
+
+def base_pairs(cfg, envs, rng, count, bar=silent):
+    """Not in the paper: `count` two-move demonstrations, whose parts (hindsight.add_parts) show a
+    block that no goal names move: in a scattered scene two different random blocks move one
+    after the other (random_move, usable_moves), and the goals are where both came to rest. A
+    part that names the second block alone needs the first move where it cleared or built the
+    second one's spot. Returns Trajectories."""
+    pairs = []
+    with bar(total=count, desc="pairs") as progress:
+        while len(pairs) < count:
+            for env in envs:
+                env.reset(seed=int(rng.integers(2**31)))
+            runs = {k: [] for k in range(len(envs))}           # each world's usable moves
+            for step in (1, 2):
+                moves = [(k, random_move(envs[k], rng, cfg.free_table)) for k in runs]
+                for k, b, a, s0, s1 in usable_moves(envs, moves):
+                    if b not in [m[0] for m in runs[k]]:        # not the block moved before
+                        runs[k].append((b, a, s0, s1))
+                runs = {k: r for k, r in runs.items() if len(r) == step}
+            for (b1, a1, s0, s1), (b2, a2, _, s2) in list(runs.values())[: count - len(pairs)]:
+                goals = {b: (float(s2[b, 0]), float(s2[b, 1])) for b in (b1, b2)}
+                pairs.append(Trajectory(goals, np.stack([s0, s1, s2]), np.stack([a1, a2]), True))
+                progress.update(1)
+    return pairs
+
+
+def demo_arrays(demos):
+    """All (observation, action) pairs of a list of demonstrations: (N, n, 6), (N, 3)."""
+    return (np.concatenate([d.obs()[:-1] for d in demos]),
+            np.concatenate([d.actions for d in demos]))
 
 
 def ppo_batch(trajs, cfg, gae=agent_lib.gae):
@@ -137,8 +191,7 @@ def ppo_batch(trajs, cfg, gae=agent_lib.gae):
     failure (no bootstrap): V(s, g) then estimates the discounted chance of reaching g within the
     budget, so a goal that cannot be reached has value 0 -- what equation (1) needs to compare.
     """
-    obs = np.concatenate([t.obs()[:-1] for t in trajs])
-    actions = np.concatenate([t.actions for t in trajs])
+    obs, actions = demo_arrays(trajs)
     logp = np.concatenate([t.logp for t in trajs])
     column = lambda per_episode: np.concatenate(per_episode)[:, None]      # -> (T_total, 1)
     values = column([t.values for t in trajs])
@@ -160,6 +213,15 @@ def stretch_tasks(tasks, count, env, rng, p_add, alter):
     """
     drawn = (tasks[i] for i in rng.integers(len(tasks), size=count))
     return [(s0, alter(goals, env, rng, True, p_add)) for s0, goals in drawn]
+
+
+@contextmanager
+def phase(where):
+    """Prefix a FloatingPointError raised by training (nn.check_finite) with where in the run."""
+    try:
+        yield
+    except FloatingPointError as e:
+        raise FloatingPointError(f"{where}: {e}") from None
 
 
 def ppo_phase(agent, tasks, cfg, envs, short_envs, rng, name, stretch=None, pieces=None,
@@ -196,14 +258,15 @@ def ppo_phase(agent, tasks, cfg, envs, short_envs, rng, name, stretch=None, piec
     return log
 
 
-def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print):
+def base_skills(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, log=print):
     """Sec 4.1: the base policy. Demos that move one block, behaviour cloning, then PPO on the
-    demos' tasks. Returns (the round's record, tasks, demo observations, demo actions)."""
+    demos' tasks. Starts `run` (its BC buffer and tasks); returns the round's record."""
     log(f"[round 0] base skills: {cfg.base_demos} single-block demos, BC, PPO")
     tasks, obs, actions = base_demos(cfg, envs, rng, cfg.base_demos, bar)
     if cfg.base_pairs:                  # not in the paper: parts of two-move demos (hindsight.py)
-        move = partial(random_move, free_table=cfg.free_table)
-        parts = pair_parts(envs, rng, cfg.base_pairs, move, on_table, bar)
+        pairs = base_pairs(cfg, envs, rng, cfg.base_pairs, bar)
+        add_parts(pairs, envs, rng, draws=4)        # 4 draws find both parts of a pair 7 times in 8
+        parts = [p for d in pairs for p in d.parts]
         log(f"  {len(parts)} parts of {cfg.base_pairs} two-move demos move a block no goal names")
         tasks = tasks + [(p.states[0], p.goals) for p in parts]
         obs, actions = (np.concatenate(a) for a in zip((obs, actions), demo_arrays(parts)))
@@ -216,7 +279,9 @@ def base_skills(agent, cfg, envs, short_envs, rng, pieces, bar=silent, log=print
     if cfg.label_tasks:           # not in the paper: V(s, g) learns from labelled outcomes too
         record.update(labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar,
                                log))
-    return record, tasks, obs, actions
+    run.buffer_obs, run.buffer_act = obs, actions
+    run.all_tasks, run.prev_tasks = list(tasks), tasks
+    return record
 
 
 # --------------------------------------------------------------------------------------------
@@ -282,7 +347,8 @@ def join(first, second, goals, success):
 
 
 def relabel(traj, env):
-    """Hindsight relabelling: the goal becomes where the goal blocks came to rest.
+    """Hindsight relabelling: the goal becomes where the goal blocks came to rest, and the
+    trajectory ends where it first holds, as its episode would have (rollout.cut).
 
     Returns None when that is no usable demonstration: a block fell off the table, or the
     relabelled goal already held at the start (nothing was achieved).
@@ -291,12 +357,7 @@ def relabel(traj, env):
     if not on_table(sT, env):
         return None
     goals = {b: (float(sT[b, 0]), float(sT[b, 1])) for b in traj.goals}
-    if is_success(traj.states[0], goals, env.threshold):
-        return None
-    # the episode would have ended the first time the relabelled goal held: cut the rest
-    T = next(t for t in range(1, len(traj.states))
-             if is_success(traj.states[t], goals, env.threshold))
-    return Trajectory(goals, traj.states[: T + 1], traj.actions[:T], True)
+    return cut(traj, goals, env.threshold)
 
 
 def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=silent):
@@ -312,8 +373,8 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     env, pieces = envs[0], pieces or Pieces()
     batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
     with bar(total=len(batch), desc="collect") as progress:
-        found = [t for t in run_episodes(agent, batch, envs, rng, bar=progress, values=False)
-                 if t.success]
+        found = [t for t in run_episodes(agent, batch, envs, rng, progress=progress,
+                                         values=False) if t.success]
     asked = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
     with bar(total=len(found), desc="eq. (1)") as progress:
         def pick(ag, job):      # equation (1) draws nothing at random: both cores share the work
@@ -323,7 +384,7 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     chosen = [cands[i] for cands, i in zip(asked, picks)]
     onward = [(traj.states[-1], goals) for traj, goals in zip(found, chosen)]
     with bar(total=len(onward), desc="verify") as progress:
-        verified = run_episodes(agent, onward, short_envs, rng, bar=progress, values=False)
+        verified = run_episodes(agent, onward, short_envs, rng, progress=progress, values=False)
     demos, reached = [], [more.success for more in verified]
     for traj, goals, more in zip(found, chosen, verified):
         joined = join(traj, more, goals, more.success)
@@ -336,42 +397,61 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
             other = other_orders(demos, envs, rng, progress)
     longest = max((len(d.actions) for d in demos), default=0)           # the replay passes
     with bar(total=longest, desc="parts") as progress:                 # none for goal_parts 0
-        parts = part_demos(demos, envs, rng, cfg.goal_parts, progress)
+        add_parts(demos, envs, rng, cfg.goal_parts, progress)
     # picks_reached: the share of equation (1)'s picks that the policy reaches from s_T, the
     # leading indicator of whether V(s, g) tells a reachable goal from an unreachable one
     info = dict(attempts=len(batch), successful=len(found), joined=sum(reached),
                 relabelled=len(demos) - sum(reached),
-                picks_reached=sum(reached) / max(len(found), 1), other_orders=other, parts=parts)
+                picks_reached=sum(reached) / max(len(found), 1), other_orders=other,
+                parts=sum(len(d.parts) for d in demos))
     return demos, info
+
+
+def generated_stats(demos, info, cfg, log=print):
+    """What a round of task expansion generated, logged: the paper's Table 1 and Figures 1-2
+    (stats.task_stats), and, beyond it, the order its demonstrations move blocks in and how often
+    they move a block that no goal names. Returns their figures."""
+    stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
+    stats.update(order_stats(with_other_orders(demos)),
+                 unnamed_moves=unnamed_moves(learnt_from(demos)))
+    runs = info["successful"]                     # one verification run from each s_T
+    unusable = runs - info["joined"] - info["relabelled"]
+    log(f"  {info['attempts']} attempts, {info['successful']} successful, {runs} runs from s_T: "
+        f"{info['joined']} joined, {info['relabelled']} relabelled, {unusable} unusable "
+        f"({info['picks_reached']:.0%} of the picks reached); "
+        f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
+    if stats["higher_first"] is not None:          # the order the actor's data teach (stats.py)
+        log(f"  {info['other_orders']} also in another order; {stats['higher_first']:.0%} of the "
+            f"{stats['multi_layer_steps']} steps with goals on several layers move a higher one; "
+            f"{info['parts']} parts: {stats['unnamed_moves']:.1%} of the steps move a block no "
+            "goal names")
+    return stats
 
 
 # --------------------------------------------------------------------------------------------
 # sec 4.3: self-distillation
 # --------------------------------------------------------------------------------------------
 
-@dataclass
-class RunState:
-    """What a run carries from one round to the next (checkpoint.py saves it as state.npz)."""
-    last_round: int = -1                # the last complete round; -1 before the base skills
-    buffer_obs: np.ndarray = None       # demo steps (N, n, 6) for BC, the newest buffer_size
-    buffer_act: np.ndarray = None       # their actions (N, 3)
-    all_tasks: list = None              # every task so far, newest buffer_size: PPO replays some
-    prev_tasks: list = None             # the tasks that the next task expansion starts from
-    results: dict = field(default_factory=dict)    # config, one record per round, wall-clock
-
-
-def self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar=silent, log=print):
-    """Sec 4.3: BC on the new demos mixed with the kept ones, then PPO on the new tasks mixed with
-    as many old ones. The buffer and the task list keep the newest cfg.buffer_size entries (the
-    memory bound of a long run). Updates `run`; returns the round's BC losses and PPO success."""
+def self_distill(agent, run, demos, k, cfg, envs, short_envs, rng, pieces, bar=silent,
+                 log=print):
+    """Sec 4.3, in round k >= 1: BC on the new demos mixed with the kept ones, then PPO on the new
+    tasks mixed with as many old ones. The buffer and the task list keep the newest
+    cfg.buffer_size entries (the memory bound of a long run). Updates `run`; returns the round's
+    BC losses and PPO success, or nothing when the expansion generated no demonstration."""
+    if not demos:
+        log("  no demonstrations generated; keeping the current policy")
+        return {}
     new_obs, new_act = demo_arrays(learnt_from(demos))
     run.buffer_obs = np.concatenate([run.buffer_obs, new_obs])[-cfg.buffer_size:]
     run.buffer_act = np.concatenate([run.buffer_act, new_act])[-cfg.buffer_size:]
-    epochs = cfg.distill_epochs[min(run.last_round, len(cfg.distill_epochs) - 1)]  # this round's
+    # round k's epochs: the k-th of cfg.distill_epochs, and its last for every round after
+    epochs = cfg.distill_epochs[min(k, len(cfg.distill_epochs)) - 1]
     bc_loss = agent.bc(run.buffer_obs, run.buffer_act, epochs, cfg.bc_batch, cfg.bc_lr, rng,
                        bar=bar)
     log(f"  BC on {len(run.buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
-    new_tasks = [(t.states[0].copy(), t.goals) for d in demos for t in (d, *d.parts)]  # s0 copied
+    # the tasks of the new demonstrations and of their parts; s0 a copy: a view would keep the
+    # whole episode's states alive as long as the task
+    new_tasks = [(t.states[0].copy(), t.goals) for d in demos for t in (d, *d.parts)]
     old = [run.all_tasks[i] for i in rng.integers(len(run.all_tasks), size=len(new_tasks))]
     ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short_envs, rng, "PPO distil",
                         pieces=pieces, bar=bar)
@@ -388,8 +468,41 @@ def evaluate(agent, tasks_by_shape, envs, bar=silent, desc="zero-shot"):
     """Zero-shot success per shape with the greedy policy: {shape: rate}."""
     with bar(total=sum(map(len, tasks_by_shape.values())), desc=desc) as progress:
         return {name: success_rate(run_episodes(agent, tasks, envs, deterministic=True,
-                                                bar=progress))
+                                                progress=progress))
                 for name, tasks in tasks_by_shape.items()}
+
+
+class Test(NamedTuple):
+    """A fixed test: tasks {name: [(s0, goals)]}, the same after every round, and the worlds they
+    are run in."""
+    tasks: dict
+    worlds: list
+
+
+def zero_shot_tests(cfg, envs, pool=None):
+    """Every Test a run makes after every round, by the name results.json records it under:
+
+      eval      the held-out shapes of sec 5 in the run's own worlds, envs (the paper's Table 2)
+      families  not in the paper: {family: Test}, tasks in which blocks that no goal names must
+                move (shapes.FAMILIES: a site to clear, supports to build)
+      blocks    not in the paper: {count: Test}, the held-out shapes in worlds of cfg.eval_blocks
+                blocks (their physics in `pool`), tried with the weights learnt in this one
+    """
+    evals, families = eval_tasks(cfg, envs[0]), family_tasks(cfg, envs[0])
+    others = {str(n): run_worlds(replace(cfg, n_blocks=n), pool)[0] for n in cfg.eval_blocks}
+    return dict(eval=Test(evals, envs),
+                families={f: Test(tasks, envs) for f, tasks in families.items()},
+                blocks={n: Test(eval_tasks(cfg, w[0]), w) for n, w in others.items()})
+
+
+def zero_shot(agent, tests, bar=silent):
+    """evaluate on each Test of `tests` (zero_shot_tests), named and grouped as they are:
+    {"eval": {shape: rate}, "families": {family: {task: rate}}, "blocks": {count: {...}}}."""
+    with warnings.catch_warnings():                 # other worlds, asked for: no need to warn
+        warnings.simplefilter("ignore", OtherWorldWarning)
+        return {name: evaluate(agent, test.tasks, test.worlds, bar, desc=name)
+                if isinstance(test, Test) else zero_shot(agent, test, bar)     # a group of Tests
+                for name, test in tests.items()}
 
 
 def direct_ppo(agent, evals, cfg, envs, short_envs, rng, pieces, bar=silent):
@@ -419,34 +532,6 @@ class Pieces:
     relabel: Callable = relabel
 
 
-def expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar=silent, log=print):
-    """One round k >= 1: task expansion from the last round's tasks (sec 4.2), then
-    self-distillation on what it generated (sec 4.3). Updates `run`; returns the round's record."""
-    log(f"[round {run.last_round + 1}] task expansion from {len(run.prev_tasks)} tasks")
-    record = {}
-    demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng, pieces, bar)
-    stats = task_stats([d.goals for d in demos], [len(d.actions) for d in demos], cfg.n_blocks)
-    stats.update(order_stats(with_other_orders(demos)), unnamed_moves=unnamed_moves(
-        learnt_from(demos)))
-    runs = info["successful"]                     # one verification run from each s_T
-    unusable = runs - info["joined"] - info["relabelled"]
-    log(f"  {info['attempts']} attempts, {info['successful']} successful, {runs} runs from s_T: "
-        f"{info['joined']} joined, {info['relabelled']} relabelled, {unusable} unusable "
-        f"({info['picks_reached']:.0%} of the picks reached); "
-        f"{stats['high_goal_tasks']} tasks with >= 3 high goals")
-    if stats["higher_first"] is not None:          # the order the actor's data teach (stats.py)
-        log(f"  {info['other_orders']} also in another order; {stats['higher_first']:.0%} of the "
-            f"{stats['multi_layer_steps']} steps with goals on several layers move a higher one; "
-            f"{info['parts']} parts: {stats['unnamed_moves']:.1%} of the steps move a block no "
-            "goal names")
-    record["expansion"] = info
-    if demos:
-        record.update(self_distill(agent, run, demos, cfg, envs, short_envs, rng, pieces, bar, log))
-    else:
-        log("  no demonstrations generated; keeping the current policy")
-    return {**record, **stats}
-
-
 def make_agent(cfg, mlp_backward=mlp_backward):
     """The untrained agent of a run with settings cfg (its network, features and action heads)."""
     return Agent(cfg.n_blocks, n_x=N_X, n_y=1 if cfg.action == "drop" else cfg.n_blocks,
@@ -468,32 +553,27 @@ def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=s
     rng = np.random.default_rng(cfg.seed) if rng is None else rng
     agent = agent or make_agent(cfg, pieces.mlp_backward)
     run = run or RunState(results=dict(config=asdict(cfg), rounds=[], wallclock={}))
-    drop = cfg.action == "drop"
     agent.threads = min(workers, SHARDS)      # both cores on every minibatch (the same results)
-    with one_blas_thread(), physics_pool(workers, drop) as pool:
+    with one_blas_thread(), physics_pool(workers, cfg.action == "drop") as pool:
         envs, short_envs = run_worlds(cfg, pool)
-        evals, families = eval_tasks(cfg, envs[0]), family_tasks(cfg, envs[0])
-        # not in the paper: the shapes in worlds of other block counts, with the same weights
-        others = {str(n): run_worlds(replace(cfg, n_blocks=n), pool)[0] for n in cfg.eval_blocks}
-        others = {n: (worlds, eval_tasks(cfg, worlds[0])) for n, worlds in others.items()}
-        agent.worlds_told.update(cfg.eval_blocks)         # the round's log says it acts in them
+        tests = zero_shot_tests(cfg, envs, pool)       # sec 5's, and those beyond the paper
         for k in range(run.last_round + 1, cfg.rounds + 1):
             with phase(f"round {k}"):
-                if k == 0:
-                    record, tasks, run.buffer_obs, run.buffer_act = base_skills(
-                        agent, cfg, envs, short_envs, rng, pieces, bar, log)
-                    run.all_tasks, run.prev_tasks = list(tasks), tasks
-                elif cfg.baseline == "direct-ppo":
+                if k == 0:                                                      # sec 4.1
+                    record = base_skills(agent, run, cfg, envs, short_envs, rng, pieces, bar, log)
+                elif cfg.baseline == "direct-ppo":                 # sec 5.3, not the method
                     log(f"[round {k}] direct PPO on the evaluation tasks")
-                    record = direct_ppo(agent, evals, cfg, envs, short_envs, rng, pieces, bar)
+                    record = direct_ppo(agent, tests["eval"].tasks, cfg, envs, short_envs, rng,
+                                        pieces, bar)
                 else:
-                    record = expansion_round(agent, run, cfg, envs, short_envs, rng, pieces, bar,
-                                             log)
-            run.results["rounds"].append(dict(        # and, not in the paper, the families
-                round=k, eval=evaluate(agent, evals, envs, bar), families={
-                    f: evaluate(agent, t, envs, bar, f) for f, t in families.items()},
-                blocks={n: evaluate(agent, t, w, bar, n) for n, (w, t) in others.items()},
-                **record))
+                    log(f"[round {k}] task expansion from {len(run.prev_tasks)} tasks")
+                    demos, info = task_expansion(agent, run.prev_tasks, cfg, envs, short_envs,
+                                                 rng, pieces, bar)                     # sec 4.2
+                    stats = generated_stats(demos, info, cfg, log)
+                    distilled = self_distill(agent, run, demos, k, cfg, envs, short_envs, rng,
+                                             pieces, bar, log)                         # sec 4.3
+                    record = dict(expansion=info, **distilled, **stats)
+            run.results["rounds"].append(dict(round=k, **zero_shot(agent, tests, bar), **record))
             run.last_round = k
             if on_round:
                 on_round(k, agent, run, rng)

@@ -36,7 +36,9 @@ ASSIGNMENT = "taskexp"                                           # the nbgrader 
 # a stub. ex2: agent.ActionDist's log-probabilities, entropy and their gradient, with its two
 # helpers; the kit's notebooks use exercises.action_dist() instead, the same interface run on
 # the student's functions (sampling and the mode are ActionDist's own, on the student's
-# log_softmax). ex5: taskexp.random_position is the reference's draw of a new position.
+# log_softmax). ex5: taskexp.random_position is the reference's draw of a new position. ex6:
+# taskexp_lib.rollout.cut is the second half of the reference's relabel (where the goals first
+# hold).
 EXERCISED = {
     "ex1": [("taskexp_lib.nn", "mlp_backward")],
     "ex2": [("agent", "log_softmax"), ("agent", "entropy_of"), ("agent", "ActionDist.log_prob"),
@@ -44,7 +46,7 @@ EXERCISED = {
     "ex3": [("agent", "gae")],
     "ex4": [("agent", "ppo_loss")],
     "ex5": [("taskexp", "alter"), ("taskexp", "random_position")],
-    "ex6": [("taskexp", "select_goal"), ("taskexp", "relabel")],
+    "ex6": [("taskexp", "select_goal"), ("taskexp", "relabel"), ("taskexp_lib.rollout", "cut")],
     "ex8": [("taskexp_lib.nn", "softmax_backward"), ("taskexp_lib.nn", "SelfAttention.backward")],
 }
 

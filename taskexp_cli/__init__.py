@@ -30,7 +30,7 @@ from taskexp import RunState
 from taskexp_lib.checkpoint import load_state, save_json, save_state, saved_results
 from taskexp_lib.config import TUPLES, Config, saved_config
 from taskexp_lib.features import FEATURES
-from taskexp_lib.geometry import MAX_BLOCKS
+from taskexp_lib.geometry import MAX_BLOCKS, block_count
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.shapes import FAMILIES, SHAPES
 
@@ -112,9 +112,8 @@ def parser():
         names = [flag(f.name)] + (["--n-blocks"] if f.name == "n_blocks" else [])
         if f.type is bool:
             kw["action"] = argparse.BooleanOptionalAction
-        elif f.type is tuple:                              # items of its default's type
-            kw["nargs"] = "*" if f.name == "eval_blocks" else "+"     # no other world: none
-            kw["type"] = type(default[0])
+        elif f.type is tuple:     # any number of its default's type; problem() refuses none
+            kw["nargs"], kw["type"] = "*", type(default[0])         # where a run needs one
         else:
             kw["type"] = f.type
         if f.name in CHOICES:
@@ -137,14 +136,15 @@ def parser():
 
 def problem(cfg):
     """The first setting of cfg that no run can use, as a one-line reason, or None."""
+    if not cfg.shapes:
+        return "--shapes must name at least one held-out shape"
     need = max(len(SHAPES[s]) for s in cfg.shapes)
-    top = MAX_BLOCKS
-    if not need <= cfg.n_blocks <= top:
-        return (f"--blocks must be in {need}..{top} (the held-out shapes need {need} blocks, the "
-                f"table holds {top}), got {cfg.n_blocks}")
-    if any(not need <= n <= top for n in cfg.eval_blocks):
-        return (f"--eval-blocks must be block counts in {need}..{top} (the held-out shapes need "
-                f"{need} blocks, the table holds {top}), got {' '.join(map(str, cfg.eval_blocks))}")
+    counts = [("--blocks", cfg.n_blocks)] + [("--eval-blocks", n) for n in cfg.eval_blocks]
+    try:
+        for name, n in counts:
+            block_count(n, least=need, name=name)
+    except ValueError as e:
+        return f"{e} (the held-out shapes need {need} blocks, the table holds {MAX_BLOCKS})"
     if not cfg.distill_epochs or min(cfg.distill_epochs) < 1:
         return (f"--distill-epochs must be epochs >= 1, round by round, got "
                 f"{' '.join(map(str, cfg.distill_epochs)) or 'none'}")
@@ -325,14 +325,14 @@ def run(cfg, out_dir, log=print, resume=False, bar=terminal_bar, workers=1):
         agent.save(os.path.join(out_dir, f"round{k}.npz"))
         save_state(state_path, agent, run, rng)                  # the commit point of round k
         save_json(os.path.join(out_dir, "results.json"), run.results)
-        ev = run.results["rounds"][-1]["eval"]
-        log(f"round {k}: zero-shot " + ", ".join(f"{s} {v:.0%}" for s, v in ev.items())
-            + f"  ({clock['total_s']:.0f}s so far, peak memory {clock['peak_memory_mb']} MB)")
-        for family, rates in run.results["rounds"][-1].get("families", {}).items():
-            log(f"  {family}: " + ", ".join(f"{s} {v:.0%}" for s, v in rates.items()))
-        for n, rates in run.results["rounds"][-1].get("blocks", {}).items():
-            log(f"  {n} blocks, the weights learnt with {cfg.n_blocks}: "
-                + ", ".join(f"{s} {v:.0%}" for s, v in rates.items()))
+        tested = run.results["rounds"][-1]
+        rates = lambda r: ", ".join(f"{s} {v:.0%}" for s, v in r.items())    # {name: success}
+        log(f"round {k}: zero-shot {rates(tested['eval'])}  ({clock['total_s']:.0f}s so far, "
+            f"peak memory {clock['peak_memory_mb']} MB)")
+        for family, r in tested.get("families", {}).items():
+            log(f"  {family}: {rates(r)}")
+        for n, r in tested.get("blocks", {}).items():
+            log(f"  {n} blocks, the weights learnt with {cfg.n_blocks}: {rates(r)}")
         t_round[0] = time.time()
 
     return taskexp.train(cfg, agent, state, rng, on_round=after_round, bar=bar, log=log,

@@ -4,26 +4,109 @@ zero-shot, in a world of any number of blocks: its success over fixed scenes, on
     python -m taskexp_cli try runs/ours-seed0/round3.npz "0,0 0,1 1.5,0 1.5,1 0.75,2"
     python -m taskexp_cli try runs/ours-seed0/round3.npz 3T --blocks 7 --gif
 
-The structure is written as cells "dx,layer" (taskexp_lib/shapes.py, read_structure) or named
-(I, Y, 3T). Each scene places it at a random spot of the table, with random blocks for its cells,
-among the others scattered as the evaluation scatters them (shapes.start_state).
+The structure is written as cells "dx,layer" (read_structure) or named (I, Y, 3T). Each scene
+places it at a random spot of the table, with random blocks for its cells, among the others
+scattered as the evaluation scatters them (shapes.start_state). A scripted builder that clears the
+site first (scripted_build) says whether the scenes can be built at all.
 """
 import os
+import warnings
 from typing import NamedTuple
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from agent import Agent
+from agent import Agent, OtherWorldWarning
 from env2d import BlockWorld
 from taskexp_lib import one_blas_thread
 from taskexp_lib.config import Config
 from taskexp_lib.draw import animate, draw_scene
-from taskexp_lib.geometry import MAX_BLOCKS
+from taskexp_lib.geometry import BLOCK_W, MAX_BLOCKS, X_BINS, block_count, is_success
 from taskexp_lib.rollout import Trajectory, run_episodes
-from taskexp_lib.shapes import place_cells, read_structure, scripted_build, site_free, start_state
+from taskexp_lib.shapes import SHAPES, blocks_needed, site_free, supports, tasks_of
 
 from . import Parser  # a refusal is one line
+
+# A structure a person writes: cells like shapes.SHAPES' as text, "dx,layer" each, separated by
+# spaces, e.g. "0,0 0,1 1.5,0 1.5,1 0.75,2" (two towers and a block across). dx is in block widths
+# from the structure's centre, on the action grid (a multiple of GRID); layer 0 rests on the
+# table. A goal may be in the air: blocks that no goal names must go under it.
+GRID = (X_BINS[1] - X_BINS[0]) / BLOCK_W            # 0.25: the x grid's spacing in block widths
+SPAN = (X_BINS[-1] - X_BINS[0]) / BLOCK_W           # 9: the widest a structure's centres may lie
+WRITE = 'write cells as dx,layer separated by spaces, e.g. "0,0 0,1 0,2"'
+
+
+def read_structure(text, n_blocks=MAX_BLOCKS):
+    """The cells [(dx, layer)] of a structure written as text (or a name in SHAPES) that a world
+    of n_blocks can hold; anything else is a ValueError whose message is one line."""
+    if text.strip() in SHAPES:
+        cells = SHAPES[text.strip()]
+    else:
+        cells = [read_cell(word) for word in text.replace(";", " ").split()]
+    if not cells:
+        raise ValueError(f"no cells: {WRITE}")
+    for i, (dx, k) in enumerate(cells):
+        for dx2, k2 in cells[i + 1:]:
+            if k == k2 and abs(dx - dx2) < 1:
+                raise ValueError(f"cells {dx:g},{k} and {dx2:g},{k2} overlap: blocks in one layer "
+                                 "lie at least 1 (a block width) apart")
+    width = max(dx for dx, _ in cells) - min(dx for dx, _ in cells)
+    if width > SPAN + 1e-9:
+        raise ValueError(f"the cells lie {width:g} block widths apart; the action grid spans "
+                         f"{SPAN:g}")
+    need = blocks_needed(cells)
+    if need > n_blocks:
+        raise ValueError(f"the structure needs {need} blocks ({len(cells)} with goals, "
+                         f"{need - len(cells)} under goals in the air); the world has {n_blocks}")
+    return cells
+
+
+def read_cell(word):
+    """(dx, layer) of one cell written "dx,layer"; a one-line ValueError otherwise."""
+    try:
+        dx, k = (float(v) for v in word.split(","))
+    except ValueError:
+        raise ValueError(f"cell {word!r}: {WRITE}") from None
+    if not np.isfinite([dx, k]).all():
+        raise ValueError(f"cell {word!r}: dx and the layer must be finite numbers")
+    if not abs(dx / GRID - round(dx / GRID)) < 1e-9:
+        raise ValueError(f"cell {word!r}: dx must be a multiple of {GRID:g} (the action grid)")
+    if not (k == int(k) and k >= 0):
+        raise ValueError(f"cell {word!r}: the layer must be a whole number >= 0 (0: the table)")
+    return dx, int(k)
+
+
+def scripted_build(env, state, goals):
+    """A scripted builder, to tell whether a scene can be built at all (here, and in the tests of
+    the families): clear every block off the columns the goals and their supports need,
+    then fill those spots bottom-up, goal blocks at their goals and blocks that no goal names at
+    the supports. env: a world that drops (BlockWorld(drop=True)) with room for the moves.
+    Returns True when the goals hold."""
+    spots = [(xy, b) for b, xy in goals.items()] + [(xy, None) for xy in supports(goals)]
+    columns = [x for (x, _), _ in spots]
+    env.reset(options={"state": state, "goals": goals})
+
+    def drop(b, x):
+        env.step(env.encode_action(b, x, env.y_bins[0]))
+
+    def apart(x, others):                                  # no overlap, touching allowed
+        return all(abs(x - o) > BLOCK_W - 1e-6 for o in others)
+
+    away = [x for x in env.x_bins if apart(x, columns)]
+    if not away:
+        return False
+    for b in [b for b in np.argsort(-state[:, 1]) if not apart(state[b, 0], columns)]:
+        others = np.delete(env.get_state(), b, axis=0)[:, 0]      # the highest in the way first
+        on_table = [x for x in away if apart(x, others)]        # else onto a block out of the way
+        drop(int(b), (on_table or away)[0])
+    spare = sorted(set(range(env.n_blocks)) - set(goals))         # for the supports
+    for (x, y), b in sorted(spots, key=lambda spot: spot[0][1]):
+        if b is None:
+            if not spare:
+                return False
+            b = spare.pop()
+        drop(b, x)
+    return is_success(env.get_state(), goals, env.threshold)
 
 
 class Tried(NamedTuple):
@@ -44,19 +127,16 @@ def try_structure(agent, structure, n_blocks=None, scenes=50, seed=0, max_steps=
     """The greedy policy of `agent` on `scenes` fixed scenes of a structure (text or a name of
     SHAPES) in a world of n_blocks (default: the one it learnt in) -> Tried. The scenes come from
     a Generator seeded with `seed`. ValueError (one line): what no world of n_blocks can build."""
-    n_blocks = agent.n_blocks if n_blocks is None else n_blocks
-    if not (isinstance(n_blocks, (int, np.integer)) and 2 <= n_blocks <= MAX_BLOCKS):
-        raise ValueError(f"blocks: a world holds 2..{MAX_BLOCKS}, got {n_blocks!r}")
+    n_blocks = block_count(agent.n_blocks if n_blocks is None else n_blocks, name="blocks")
     if not scenes >= 1:
         raise ValueError(f"scenes: at least 1, got {scenes!r}")
     cells = read_structure(structure, n_blocks)
     rng = np.random.default_rng(seed)
     worlds = [BlockWorld(n_blocks, max_steps=max_steps, drop=agent.drops) for _ in range(16)]
-    tasks = []
-    for _ in range(scenes):
-        goals = place_cells(cells, worlds[0], rng, name="the structure")
-        tasks.append((start_state(worlds[0], goals, rng), goals))
-    episodes = run_episodes(agent, tasks, worlds, deterministic=True, values=False)
+    tasks = tasks_of(cells, worlds[0], rng, scenes, name="the structure")
+    with warnings.catch_warnings():            # another world, asked for: main() says so
+        warnings.simplefilter("ignore", OtherWorldWarning)
+        episodes = run_episodes(agent, tasks, worlds, deterministic=True, values=False)
     builder = BlockWorld(n_blocks, max_steps=4 * n_blocks, drop=True)
     return Tried(cells, episodes, [site_free(s0, goals) for s0, goals in tasks],
                  [scripted_build(builder, s0, goals) for s0, goals in tasks])
@@ -126,19 +206,21 @@ def main(argv=None):
             p.error(f"--{name} must be >= {low}, got {getattr(a, name)}")
     if not 0 <= a.scene < a.scenes:
         p.error(f"--scene must be in 0..{a.scenes - 1}, got {a.scene}")
-    try:
+    folder, kind = os.path.dirname(os.path.abspath(a.out)), os.path.splitext(a.out)[1][1:].lower()
+    if not os.path.isdir(folder):
+        p.error(f"--out {a.out}: no folder {folder} to draw in")
+    if kind not in Figure().canvas.get_supported_filetypes():
+        p.error(f"--out {a.out}: name a picture, e.g. tried.png")
+    try:                                             # every argument checked before a word
         agent = Agent.load(a.checkpoint)
+        n = block_count(agent.n_blocks if a.blocks is None else a.blocks, name="--blocks")
+        read_structure(a.structure, n)
     except ValueError as e:
         p.error(str(e).splitlines()[0])
-    n = agent.n_blocks if a.blocks is None else a.blocks
-    agent.worlds_told.add(n)                                 # said here, in plain words
     print(f"{a.checkpoint}: learnt in a world of {agent.n_blocks} blocks, tried in one of {n}"
           + (" (the same weights)" if n != agent.n_blocks else ""))
-    try:
-        with one_blas_thread():
-            tried = try_structure(agent, a.structure, n, a.scenes, a.seed, a.steps)
-    except ValueError as e:
-        p.error(str(e))
+    with one_blas_thread():
+        tried = try_structure(agent, a.structure, n, a.scenes, a.seed, a.steps)
     print(summary(tried))
     episode = tried.episodes[a.scene]
     attempt_figure(episode).savefig(a.out, dpi=100)

@@ -10,19 +10,15 @@ the agent (agent.py): what those three are built from, and the plumbing around t
   rollout.py     batched episodes, and the worker processes that run the physics
   shards.py      both cores on one minibatch: data-parallel gradients in two threads
   checkpoint.py  every file a run writes: checkpoints, the resume state, results.json
-  shapes.py      the held-out shapes, the families of blocks no goal names, their scenes, and
-                 structures a person writes (read_structure)
+  shapes.py      the held-out shapes, the families of blocks no goal names, and their scenes
   labels.py      labelled outcomes for V(s, g) (not in the paper)
   orders.py      the generated demonstrations in other orders (not in the paper)
   hindsight.py   a demonstration of goals g is one of any part of g (not in the paper)
   stats.py       what the generated tasks and demonstrations look like
   stress.py      stress actions for the physics tests and benchmarks
 
-and one_blas_thread(), the one setting a run makes for the whole process, and phase(), which says
-where in a run training diverged.
+and one_blas_thread(), the one setting a run makes for the whole process.
 """
-from contextlib import contextmanager
-
 import numpy  # noqa: F401  (loads BLAS first: threadpoolctl limits only libraries already loaded)
 from threadpoolctl import threadpool_limits
 
@@ -33,11 +29,3 @@ def one_blas_thread():
     (taskexp.train runs in one); called on its own, for the rest of the program (a notebook)."""
     return threadpool_limits(limits=1)
 
-
-@contextmanager
-def phase(where):
-    """Prefix a FloatingPointError raised by training (nn.check_finite) with where in the run."""
-    try:
-        yield
-    except FloatingPointError as e:
-        raise FloatingPointError(f"{where}: {e}") from None

@@ -18,6 +18,16 @@ GEOMETRY = {"block_w": BLOCK_W, "block_h": BLOCK_H, "table_lo": TABLE_X[0], "tab
             "threshold": THRESHOLD, "x_lo": X_BINS[0], "x_hi": X_BINS[-1]}
 
 
+def block_count(n, least=2, name="n_blocks"):
+    """n as an int when a world of n blocks can be made and used: least..MAX_BLOCKS (the table
+    holds MAX_BLOCKS; a run's own world needs its held-out shapes' blocks). Anything else is a
+    ValueError whose message is one line and names `name`. Every layer that takes a block count
+    checks it here: the world, the agent, the command line and `try`."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not least <= n <= MAX_BLOCKS:
+        raise ValueError(f"{name} must be in {least}..{MAX_BLOCKS}, got {n!r}")
+    return int(n)
+
+
 def nearest_x_bin(x):
     """The index of the x grid's bin nearest to x."""
     return int(np.abs(X_BINS - x).argmin())

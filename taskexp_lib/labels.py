@@ -38,7 +38,7 @@ def top_candidates(agent, traj, cands, k, pieces, mode):
     return top
 
 
-def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar):
+def labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar, log):
     """Label, then fit V, cfg.label_iters times; each time on cfg.label_tasks / label_iters tasks
     and for cfg.label_epochs / label_iters epochs.
 
@@ -51,7 +51,8 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
        configuration it did reach as a positive (hindsight relabelling, as in sec 4.2);
     4. regress V on all labels so far (Agent.fit_value), then, with cfg.label_pair > 0, on the
        pairs (V(sT, g), V(s0, g)) with that weight on their difference (Agent.fit_value_pairs).
-    Each round labels the picks of the critic the last round left. Returns a record.
+    Each round labels the picks of the critic the last round left. Logs what it did and returns
+    it as a record.
     """
     env = envs[0]
     obs, targets, pairs, pair_targets = [], [], [], []
@@ -61,8 +62,8 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
         size = cfg.label_tasks // cfg.label_iters
         batch = [tasks[i] for i in rng.integers(len(tasks), size=size)]
         with bar(total=len(batch), desc=f"collect {it + 1}") as progress:
-            found = [t for t in run_episodes(agent, batch, envs, rng, bar=progress, values=False)
-                     if t.success]
+            found = [t for t in run_episodes(agent, batch, envs, rng, progress=progress,
+                                             values=False) if t.success]
         drawn = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
         with bar(total=len(found), desc=f"rank {it + 1}") as progress:
             def rank(ag, job):
@@ -75,9 +76,9 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
             asked += [(traj, cands[i]) for i in (top + rest)[: cfg.label_per]]
         with bar(total=2 * len(asked), desc=f"label {it + 1}") as progress:
             from_end = run_episodes(agent, [(t.states[-1], g) for t, g in asked], short_envs,
-                                    rng, bar=progress, values=False)
+                                    rng, progress=progress, values=False)
             from_start = run_episodes(agent, [(t.states[0], g) for t, g in asked], short_envs,
-                                      rng, bar=progress, values=False)
+                                      rng, progress=progress, values=False)
         for a, b in zip(from_end, from_start):   # V(sT, g) and V(s0, g): what equation (1) reads
             pairs.append(np.stack([a.obs()[0], b.obs()[0]]))
             pair_targets.append([discounted_outcome(e, cfg.gamma)[0] for e in (a, b)])
@@ -95,14 +96,9 @@ def label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates,
         if cfg.label_pair > 0:
             loss = agent.fit_value_pairs(np.stack(pairs), np.array(pair_targets), cfg.label_pair,
                                          epochs, cfg.bc_batch, cfg.label_lr, rng, bar=bar)
-    return dict(label_runs=n_runs, label_rows=int(sum(len(t) for t in targets)),
-                label_success=n_reached / max(n_runs, 1), label_loss=loss)
+    rows, shown = int(sum(len(t) for t in targets)), loss or [float("nan")]
+    log(f"  V on {rows} labelled states from {n_runs} runs ({n_reached / max(n_runs, 1):.0%} "
+        f"reached): loss {shown[0]:.3f} -> {shown[-1]:.3f}")
+    return dict(label_runs=n_runs, label_rows=rows, label_success=n_reached / max(n_runs, 1),
+                label_loss=loss)
 
-
-def labelled(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar, log):
-    """label_outcomes, logged -> its record."""
-    out = label_outcomes(agent, tasks, cfg, envs, short_envs, rng, pieces, candidates, bar)
-    loss = out["label_loss"] or [float("nan")]
-    log(f"  V on {out['label_rows']} labelled states from {out['label_runs']} runs "
-        f"({out['label_success']:.0%} reached): loss {loss[0]:.3f} -> {loss[-1]:.3f}")
-    return out

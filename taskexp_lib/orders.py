@@ -11,7 +11,7 @@ import numpy as np
 from .rollout import replay
 
 
-def other_orders(demos, envs, rng, bar=None):
+def other_orders(demos, envs, rng, progress=None):
     """Not in the paper: each demonstration's moves in another order that physics allows.
 
     A demonstration shows one order of its moves, and BC learns that order's habits with it. A
@@ -23,7 +23,7 @@ def other_orders(demos, envs, rng, bar=None):
     reverse, where the draw gives its own): where the simulator meets the same goals, that order
     is kept too (demo.other_order), so the only order the data insist on is the one physics
     demands, a support before what it carries. Like relabelling, a use of the simulator, not a
-    rule. bar: a progress bar to advance per demonstration replayed. Returns how many other
+    rule. progress: a progress bar to advance per demonstration replayed. Returns how many other
     orders were kept.
     """
     moved = [d for d in demos if len(d.actions) > 1]
@@ -33,7 +33,7 @@ def other_orders(demos, envs, rng, bar=None):
         if (order == np.arange(len(order))).all():
             order = order[::-1]
         plans.append(d.actions[order])
-    others = replay([(d.states[0], d.goals) for d in moved], plans, envs, bar)
+    others = replay([(d.states[0], d.goals) for d in moved], plans, envs, progress)
     for demo, other in zip(moved, others):
         demo.other_order = other if other.success else None
     return sum(other.success for other in others)

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .geometry import observation
+from .geometry import THRESHOLD, is_success, observation
 
 _MAKE_WORLD, _WORLDS = None, {}   # a worker's own worlds, by block count, which simulate for
                                   # the main process
@@ -88,10 +88,13 @@ class Trajectory:
         return np.stack([observation(s, g) for s in self.states])
 
 
-def demo_arrays(demos):
-    """All (observation, action) pairs of a list of demonstrations: (N, n, 6), (N, 3)."""
-    return (np.concatenate([d.obs()[:-1] for d in demos]),
-            np.concatenate([d.actions for d in demos]))
+def cut(traj, goals, threshold=THRESHOLD):
+    """The trajectory under other goals, ended where they first hold, as its episode would have
+    ended (success); None if they hold at the start (it achieves nothing) or never."""
+    T = next((t for t, s in enumerate(traj.states) if is_success(s, goals, threshold)), None)
+    if T is None or T == 0:
+        return None
+    return Trajectory(goals, traj.states[:T + 1], traj.actions[:T], True)
 
 
 def simulate(envs, ks, actions):
@@ -104,12 +107,12 @@ def simulate(envs, ks, actions):
     return pool.simulate(states, actions)
 
 
-def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None, values=True):
+def run_episodes(agent, tasks, envs, rng=None, deterministic=False, progress=None, values=True):
     """Run one episode per task, len(envs) at a time with one batched policy call per step.
 
     tasks: list of (state (n, 6), goals); envs: a list of BlockWorlds, or Worlds whose pool
     runs the physics. Returns a list of Trajectory in the order of `tasks`.
-    bar: a progress bar (tqdm) to advance by one per finished episode.
+    progress: a progress bar (a tqdm) to advance by one per finished episode.
     values: record log pi(a) and V(s, g) of every step, which PPO needs; without them (0s) the
     critic is not run, and the actions drawn are the same.
     """
@@ -150,16 +153,16 @@ def run_episodes(agent, tasks, envs, rng=None, deterministic=False, bar=None, va
                 out[s["i"]] = Trajectory(tasks[s["i"]][1], np.stack(s["states"]),
                                          np.stack(s["actions"]), bool(terminated),
                                          np.array(s["logp"]), np.array(s["values"]))
-                if bar is not None:
-                    bar.update(1)
+                if progress is not None:
+                    progress.update(1)
                 start(k)
 
 
-def replay(tasks, plans, envs, bar=None):
+def replay(tasks, plans, envs, progress=None):
     """Play fixed sequences of actions: for tasks[i] = (state, goals), the actions plans[i] (T, 3)
     in order, len(envs) tasks at a time, until the goals hold (stable) or the plan ends; the
     worlds' step budget does not cut a plan. Returns a list of Trajectory in the order of tasks,
-    success True when the goals held at the end. bar: a progress bar to advance per task."""
+    success True when the goals held at the end. progress: a progress bar to advance per task."""
     out = []
     for start in range(0, len(tasks), len(envs)):
         chunk = range(start, min(start + len(envs), len(tasks)))
@@ -178,8 +181,8 @@ def replay(tasks, plans, envs, bar=None):
         for k, i in enumerate(chunk):
             played = np.asarray(plans[i])[:len(states[k]) - 1]
             out.append(Trajectory(tasks[i][1], np.stack(states[k]), played, done[k]))
-        if bar is not None:
-            bar.update(len(chunk))
+        if progress is not None:
+            progress.update(len(chunk))
     return out
 
 

@@ -1,9 +1,10 @@
 """taskexp_lib/shapes.py -- the held-out shapes of sec 5 and their fixed evaluation scenes (the
 2D analogues of the paper's test structures; taskexp.evaluate builds them zero-shot), and two
-families of tasks beside them in which blocks that no goal names must move (FAMILIES)."""
+families of tasks beside them in which blocks that no goal names must move (FAMILIES): cells,
+goals placed from them, scenes, and the supports that goals in the air need."""
 import numpy as np
 
-from .geometry import BLOCK_H, BLOCK_W, X_BINS, is_success, layer_y
+from .geometry import BLOCK_H, BLOCK_W, is_success, layer_y
 
 # Held-out shapes: (offset from the centre in block widths, layer). None of them can occur among
 # the base tasks (at most 3 goals, at most one block moved), and each has >= 4 goals with >= 3
@@ -24,55 +25,6 @@ FAMILIES = {
             "two apart": [(-1.5, 1), (1.5, 1)],                    # one storey up, each
             "tower top": [(0, 2), (0, 3)]},                        # a tower's top, base free
 }
-
-
-# A structure a person writes (taskexp_cli's `try`): cells like SHAPES' as text, "dx,layer" each,
-# separated by spaces, e.g. "0,0 0,1 1.5,0 1.5,1 0.75,2" (two towers and a block across). dx
-# is in block widths from the structure's centre, on the action grid (a multiple of GRID); layer 0
-# rests on the table. A goal may be in the air: blocks that no goal names must go under it.
-GRID = (X_BINS[1] - X_BINS[0]) / BLOCK_W            # 0.25: the x grid's spacing in block widths
-SPAN = (X_BINS[-1] - X_BINS[0]) / BLOCK_W           # 9: the widest a structure's centres may lie
-WRITE = 'write cells as dx,layer separated by spaces, e.g. "0,0 0,1 0,2"'
-
-
-def read_structure(text, n_blocks=8):
-    """The cells [(dx, layer)] of a structure written as text (or a name in SHAPES) that a world
-    of n_blocks can hold; anything else is a ValueError whose message is one line."""
-    if text.strip() in SHAPES:
-        cells = SHAPES[text.strip()]
-    else:
-        cells = [read_cell(word) for word in text.replace(";", " ").split()]
-    if not cells:
-        raise ValueError(f"no cells: {WRITE}")
-    for i, (dx, k) in enumerate(cells):
-        for dx2, k2 in cells[i + 1:]:
-            if k == k2 and abs(dx - dx2) < 1:
-                raise ValueError(f"cells {dx:g},{k} and {dx2:g},{k2} overlap: blocks in one layer "
-                                 "lie at least 1 (a block width) apart")
-    width = max(dx for dx, _ in cells) - min(dx for dx, _ in cells)
-    if width > SPAN + 1e-9:
-        raise ValueError(f"the cells lie {width:g} block widths apart; the action grid spans "
-                         f"{SPAN:g}")
-    need = blocks_needed(cells)
-    if need > n_blocks:
-        raise ValueError(f"the structure needs {need} blocks ({len(cells)} with goals, "
-                         f"{need - len(cells)} under goals in the air); the world has {n_blocks}")
-    return cells
-
-
-def read_cell(word):
-    """(dx, layer) of one cell written "dx,layer"; a one-line ValueError otherwise."""
-    try:
-        dx, k = (float(v) for v in word.split(","))
-    except ValueError:
-        raise ValueError(f"cell {word!r}: {WRITE}") from None
-    if not np.isfinite([dx, k]).all():
-        raise ValueError(f"cell {word!r}: dx and the layer must be finite numbers")
-    if not abs(dx / GRID - round(dx / GRID)) < 1e-9:
-        raise ValueError(f"cell {word!r}: dx must be a multiple of {GRID:g} (the action grid)")
-    if not (k == int(k) and k >= 0):
-        raise ValueError(f"cell {word!r}: the layer must be a whole number >= 0 (0: the table)")
-    return dx, int(k)
 
 
 def blocks_needed(cells):
@@ -98,11 +50,6 @@ def place_cells(cells, env, rng, name="the cells"):
             for b, (dx, k) in zip(blocks, cells)}
 
 
-def shape_goals(name, env, rng):
-    """Goals for the held-out shape `name` at a random place, with randomly assigned blocks."""
-    return place_cells(SHAPES[name], env, rng, name=f"shape {name!r}")
-
-
 def start_state(env, goals, rng):
     """A random scattered scene for these goals (the env keeps goal footprints clear)."""
     env.reset(seed=int(rng.integers(2**31)), options={"goals": goals})
@@ -122,16 +69,21 @@ def blocked_state(env, goals, rng):
     return state
 
 
+def tasks_of(cells, env, rng, count, scene=start_state, name="the cells"):
+    """`count` tasks [(s0, goals)] of the cells, each placed at random (place_cells) in a scene
+    of its own: scattered (start_state), or with a block on the site (blocked_state)."""
+    tasks = []
+    for _ in range(count):
+        goals = place_cells(cells, env, rng, name)
+        tasks.append((scene(env, goals, rng), goals))
+    return tasks
+
+
 def eval_tasks(cfg, env):
     """Fixed evaluation tasks per shape: the same scenes after every round (own Generator)."""
     rng = np.random.default_rng([cfg.seed, cfg.eval_salt])
-    out = {}
-    for name in cfg.shapes:
-        out[name] = []
-        for _ in range(cfg.eval_episodes):
-            goals = shape_goals(name, env, rng)
-            out[name].append((start_state(env, goals, rng), goals))
-    return out
+    return {name: tasks_of(SHAPES[name], env, rng, cfg.eval_episodes, name=f"shape {name!r}")
+            for name in cfg.shapes}
 
 
 def supports(goals):
@@ -163,44 +115,7 @@ def family_tasks(cfg, env):
     out = {}
     for family in cfg.families:
         scene = blocked_state if family == "blocked" else start_state
-        out[family] = {}
-        for name, cells in FAMILIES[family].items():
-            if blocks_needed(cells) + (family == "blocked") > env.n_blocks:     # + the blocker
-                continue
-            out[family][name] = []
-            for _ in range(cfg.eval_episodes):
-                goals = place_cells(cells, env, rng)
-                out[family][name].append((scene(env, goals, rng), goals))
+        out[family] = {name: tasks_of(cells, env, rng, cfg.eval_episodes, scene)
+                       for name, cells in FAMILIES[family].items()
+                       if blocks_needed(cells) + (family == "blocked") <= env.n_blocks}  # blocker
     return out
-
-
-def scripted_build(env, state, goals):
-    """A scripted builder, to check that a scene can be built (tests; lab/bench): clear every
-    block off the columns the goals and their supports need, then fill those spots bottom-up,
-    goal blocks at their goals and blocks that no goal names at the supports. env: a world that
-    drops (BlockWorld(drop=True)) with room for the moves. Returns True when the goals hold."""
-    spots = [(xy, b) for b, xy in goals.items()] + [(xy, None) for xy in supports(goals)]
-    columns = [x for (x, _), _ in spots]
-    env.reset(options={"state": state, "goals": goals})
-
-    def drop(b, x):
-        env.step(env.encode_action(b, x, env.y_bins[0]))
-
-    def apart(x, others):                                  # no overlap, touching allowed
-        return all(abs(x - o) > BLOCK_W - 1e-6 for o in others)
-
-    away = [x for x in env.x_bins if apart(x, columns)]
-    if not away:
-        return False
-    for b in [b for b in np.argsort(-state[:, 1]) if not apart(state[b, 0], columns)]:
-        others = np.delete(env.get_state(), b, axis=0)[:, 0]      # the highest in the way first
-        on_table = [x for x in away if apart(x, others)]        # else onto a block out of the way
-        drop(int(b), (on_table or away)[0])
-    spare = sorted(set(range(env.n_blocks)) - set(goals))         # for the supports
-    for (x, y), b in sorted(spots, key=lambda spot: spot[0][1]):
-        if b is None:
-            if not spare:
-                return False
-            b = spare.pop()
-        drop(b, x)
-    return is_success(env.get_state(), goals, env.threshold)

@@ -4,10 +4,11 @@ import numpy as np
 import pytest
 
 from env2d import BlockWorld
+from taskexp_cli.try_structure import scripted_build
 from taskexp_lib import hindsight, shapes
 from taskexp_lib.config import Config
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, is_success, layer, layer_y
-from taskexp_lib.rollout import Trajectory, replay
+from taskexp_lib.rollout import Trajectory, cut, replay
 
 
 @pytest.fixture
@@ -47,7 +48,7 @@ def test_family_scenes_need_blocks_no_goal_names_and_a_script_builds_them(famili
                     assert all(abs(s0[b, 0] - x) >= BLOCK_W - 1e-9 for b in range(6)
                                for x, _ in goals.values())
                     assert shapes.supports(goals)
-                assert shapes.scripted_build(world, s0, goals), (family, name, goals)
+                assert scripted_build(world, s0, goals), (family, name, goals)
 
 
 def test_a_family_that_needs_more_blocks_than_the_world_has_is_left_out():
@@ -60,7 +61,7 @@ def test_scripted_builder_fails_where_a_block_is_missing(world):
     """The builder is a check, not a rubber stamp: goals whose supports no free block can fill."""
     goals = {b: (x, layer_y(2)) for b, x in enumerate((-0.3, 0.0, 0.3))}   # 6 supports, 3 free
     s0 = shapes.start_state(world, goals, np.random.default_rng(0))
-    assert not shapes.scripted_build(world, s0, goals)
+    assert not scripted_build(world, s0, goals)
 
 
 def drops(world, moves):
@@ -83,8 +84,9 @@ def test_a_part_keeps_the_support_its_goal_needs_and_drops_the_rest(world):
     goals = {0: (x, layer_y(0)), 1: (x, layer_y(1)), 5: (0.1, layer_y(0))}
     demo = played(world, s0, goals, [(5, 0.1), (0, x), (1, x)])
     assert demo.success and len(demo.actions) == 3
-    part = hindsight.cut(demo, {1: goals[1]})               # the top block alone: 0 carries none
-    hindsight.needed_moves([part], [world])
+    whole = cut(demo, {1: goals[1]})                        # the top block alone: 0 carries none
+    part, = hindsight.needed_moves([whole], [world])
+    assert len(whole.actions) == 3                          # a query: what it was given stays
     assert [int(a[0]) for a in part.actions] == [0, 1]      # block 5's move is not needed
     assert is_success(part.states[-1], part.goals) and not is_success(part.states[0], part.goals)
 
@@ -95,8 +97,7 @@ def test_a_part_keeps_the_move_that_clears_its_site(world):
     goals = {2: (0.05, layer_y(0)), 4: (p, layer_y(0))}
     demo = played(world, s0, goals, [(2, 0.05), (4, p)])
     assert demo.success
-    part = hindsight.cut(demo, {4: goals[4]})
-    hindsight.needed_moves([part], [world])
+    part, = hindsight.needed_moves([cut(demo, {4: goals[4]})], [world])
     assert [int(a[0]) for a in part.actions] == [2, 4]      # 2, which no goal names, moves away
     assert 2 not in part.goals
 
@@ -106,8 +107,8 @@ def test_cut_ends_where_a_part_first_holds_and_refuses_one_held_at_the_start(wor
     x = float(world.x_bins[18])
     goals = {0: (x, layer_y(0)), 1: (x, layer_y(1))}
     demo = played(world, s0, goals, [(0, x), (1, x)])
-    assert len(hindsight.cut(demo, {0: goals[0]}).actions) == 1
-    assert hindsight.cut(demo, {3: tuple(s0[3, :2])}) is None
+    assert len(cut(demo, {0: goals[0]}).actions) == 1
+    assert cut(demo, {3: tuple(s0[3, :2])}) is None
 
 
 def test_goal_parts_are_proper_and_reproducible():
@@ -118,7 +119,7 @@ def test_goal_parts_are_proper_and_reproducible():
     assert draws[0] == hindsight.goal_part(goals, np.random.default_rng(0))
 
 
-def test_part_demos_keep_the_parts_that_move_a_block_no_goal_names(world):
+def test_add_parts_keeps_the_parts_that_move_a_block_no_goal_names(world):
     s0 = scene(world)
     x = float(world.x_bins[16])
     tower = {0: (x, layer_y(0)), 1: (x, layer_y(1)), 2: (x, layer_y(2))}
@@ -126,9 +127,9 @@ def test_part_demos_keep_the_parts_that_move_a_block_no_goal_names(world):
     apart = {0: (x, layer_y(0)), 5: (0.1, layer_y(0))}       # neither part needs the other's move
     demos.append(played(world, s0, apart, [(0, x), (5, 0.1)]))
     one = played(world, s0, {0: tower[0]}, [(0, x)])
-    made = hindsight.part_demos(demos + [one], [world], np.random.default_rng(0), 4)
+    hindsight.add_parts(demos + [one], [world], np.random.default_rng(0), 4)
     assert one.parts == [] and demos[-1].parts == []        # no part moves a block it leaves out
-    assert made == sum(len(d.parts) for d in demos) > 10
+    assert sum(len(d.parts) for d in demos) > 10
     for d in demos[:-1]:
         assert len({tuple(sorted(p.goals)) for p in d.parts}) == len(d.parts)    # each once
         for p in d.parts:

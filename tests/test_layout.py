@@ -1,4 +1,5 @@
-"""The code's layout: three floors, one job per file, no import cycle, no module loaded twice.
+"""The code's layout: the method in the paper's order, three floors, one job per file, no import
+cycle, no module loaded twice.
 
     ground floor   taskexp_lib/   layers, networks, features, geometry, config, checkpoints,
                                   episodes, drawing: imports none of the floors above
@@ -19,7 +20,11 @@ import sys
 import textwrap
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-MAX_LINES = 500
+# taskexp.py defines the paper's functions in the paper's order: sec 4.1, 4.2 (its three steps,
+# then the round), 4.3, 5, and last the loop that calls them, whose body fits on one screen
+PAPER_ORDER = ("base_demos", "base_skills", "alter", "select_goal", "relabel", "task_expansion",
+               "self_distill", "evaluate", "train")
+LOOP_LINES = 30
 METHOD = ("taskexp", "env2d", "agent")
 FLOORS = {"taskexp_lib": 0, **{m: 1 for m in METHOD}, "taskexp_cli": 2}
 
@@ -87,10 +92,37 @@ def floor(module):
     return FLOORS.get(module.split(".")[0])
 
 
-def test_no_file_is_longer_than_500_lines():
-    files = {**module_files(), **lab_scripts()}
-    long = {m: n for m, p in files.items() if (n := len(open(p).readlines())) > MAX_LINES}
-    assert not long, f"over {MAX_LINES} lines: {long}"
+def out_of_order(source):
+    """What keeps a method file's source from reading as the paper: a function of PAPER_ORDER
+    missing or defined before the one it follows, or train's body (after its docstring) longer
+    than LOOP_LINES lines -> a list of reasons (empty: none)."""
+    functions = {n.name: n for n in ast.parse(source).body if isinstance(n, ast.FunctionDef)}
+    wrong = [f"{name} is not defined" for name in PAPER_ORDER if name not in functions]
+    found = [name for name in PAPER_ORDER if name in functions]
+    wrong += [f"{b} comes before {a}" for a, b in zip(found, found[1:])
+              if functions[b].lineno < functions[a].lineno]
+    if "train" in functions:
+        body = functions["train"].body[1:]
+        lines = body[-1].end_lineno - body[0].lineno + 1 if body else 0
+        if lines > LOOP_LINES:
+            wrong.append(f"train's body takes {lines} lines, more than {LOOP_LINES}")
+    return wrong
+
+
+def test_the_method_reads_in_the_papers_order():
+    with open(os.path.join(ROOT, "taskexp.py")) as f:
+        assert out_of_order(f.read()) == []
+
+
+def test_the_order_test_sees_a_function_out_of_place_and_a_long_loop():
+    defs = {name: f"def {name}():\n    'doc'\n    pass\n" for name in PAPER_ORDER}
+    assert out_of_order("".join(defs.values())) == []
+    swapped = dict(defs, alter=defs["select_goal"], select_goal=defs["alter"])
+    assert out_of_order("".join(swapped.values())) == ["select_goal comes before alter"]
+    long = dict(defs, train="def train():\n    'doc'\n" + "    pass\n" * (LOOP_LINES + 1))
+    assert out_of_order("".join(long.values())) == [
+        f"train's body takes {LOOP_LINES + 1} lines, more than {LOOP_LINES}"]
+    assert out_of_order("") == [f"{name} is not defined" for name in PAPER_ORDER]
 
 
 def cycle(graph):

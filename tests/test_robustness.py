@@ -58,6 +58,8 @@ def child(*argv):
     (["--max-stay", "6"], "--max-stay must be below --blocks"),
     (["--shapes", "O"], "invalid choice"),
     (["--distill-epochs", "8", "0"], "--distill-epochs must be epochs >= 1"),
+    (["--distill-epochs"], "--distill-epochs must be epochs >= 1, round by round, got none"),
+    (["--shapes"], "--shapes must name at least one held-out shape"),
     (["--resume", "--out", "runs/x", "--ppo-steps", "9"], "drop --ppo-steps"),
 ])
 def test_cli_refuses_bad_arguments_in_one_line(argv, reason, capsys):

@@ -106,7 +106,7 @@ def test_relabel_uses_reached_positions(env):
 def test_shapes_are_held_out_and_buildable(env, name):
     rng = np.random.default_rng(2)
     for _ in range(5):
-        goals = shapes.shape_goals(name, env, rng)
+        goals = shapes.place_cells(shapes.SHAPES[name], env, rng)
         high = [b for b, (_, y) in goals.items() if layer(y) >= 1]
         assert len(goals) >= 4 and len(high) >= 3
         obs, _ = env.reset(seed=int(rng.integers(1000)), options={"goals": goals})
@@ -165,7 +165,8 @@ def test_every_phase_of_a_run_shows_progress(tmp_path):
     cli.run(cfg, str(tmp_path / "run"), log=lambda *a: None, bar=bar)
     phases = {"demos", "BC", "PPO base", "collect 1", "rank 1", "label 1", "value fit",
               "pair value fit", "collect", "eq. (1)", "verify", "other orders", "PPO distil",
-              "zero-shot", "blocked", "air"} | ({"parts"} if taskexp.Config.goal_parts else set())
+              "eval", "blocked", "air", "7", "8"} | ({"parts"} if taskexp.Config.goal_parts
+                                                       else set())
     assert phases <= set(asked), phases - set(asked)
 
 

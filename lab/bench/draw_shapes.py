@@ -32,8 +32,7 @@ def main():
     names = list(shapes.SHAPES)
     fig = Figure(figsize=(4.2 * len(names), 4.6))
     for col, name in enumerate(names):
-        goals = shapes.shape_goals(name, env, rng)
-        s0 = shapes.start_state(env, goals, rng)
+        (s0, goals), = shapes.tasks_of(shapes.SHAPES[name], env, rng, 1)
         draw_scene(fig.add_subplot(2, len(names), col + 1), s0, goals,
                    title=f'"{name}": start and goals')
         if agent:

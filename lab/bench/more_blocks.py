@@ -44,9 +44,10 @@ def split_by_site(agent, tasks, worlds):
 
 
 def world_of(cfg, n, pool=None):
-    """The worlds of n blocks and their fixed evaluation scenes, as taskexp.train makes them."""
+    """The held-out shapes' fixed scenes in a world of n blocks, and its worlds: the Test that
+    taskexp.zero_shot_tests makes for it."""
     worlds = run_worlds(replace(cfg, n_blocks=n), pool)[0]
-    return worlds, eval_tasks(cfg, worlds[0])
+    return taskexp.Test(eval_tasks(cfg, worlds[0]), worlds)
 
 
 def record(run, workers=2):
@@ -57,12 +58,10 @@ def record(run, workers=2):
         results = json.load(f)
     cfg = saved_config(results["config"])              # a run made before: Config's eval_blocks
     with physics_pool(workers, cfg.action == "drop") as pool:
-        others = {str(n): world_of(cfg, n, pool) for n in cfg.eval_blocks}    # once, every round
+        tests = {str(n): world_of(cfg, n, pool) for n in cfg.eval_blocks}    # once, every round
         for k, rnd in enumerate(results["rounds"]):
             agent = Agent.load(os.path.join(run, f"round{k}.npz"))
-            agent.worlds_told.update(cfg.eval_blocks)
-            blocks = {n: taskexp.evaluate(agent, tasks, worlds)
-                      for n, (worlds, tasks) in others.items()}
+            blocks = taskexp.zero_shot(agent, tests)
             first = {key: rnd.pop(key) for key in ("round", "eval", "families") if key in rnd}
             results["rounds"][k] = {**first, "blocks": blocks, **rnd}
             print(f"round {k}: " + "; ".join(f"{n} blocks " + ", ".join(
@@ -94,7 +93,7 @@ def main():
     print("|---|---|---|---|---|---|")
     warnings.simplefilter("ignore", OtherWorldWarning)            # the table says so
     for n in counts:                                # the run's own world the same way
-        worlds, tasks = world_of(cfg, n)
+        tasks, worlds = world_of(cfg, n)
         for shape, (won, free, on_free, on_busy) in split_by_site(agent, tasks, worlds).items():
             print(f"| {n} | {shape} | {won} | {free} | {on_free} | {on_busy} |")
 
