@@ -3,17 +3,22 @@
 
 The student writes alter(goals, env, rng) -> a new goal dict: exactly one goal added for a free
 block, or one goal modified. alter is random, so the check samples it: each sample must follow
-the rules (one alteration, on the grid, the input unchanged), and all samples together must show
-both kinds, every block and the whole grid, reproducibly from the rng passed in.
+the rules (one alteration, on the grid, not on the spot another goal names, the input unchanged),
+and all samples together must show both kinds half the time each where a block is free, every
+block and the whole grid, reproducibly from the rng passed in.
 """
 import copy
 from types import SimpleNamespace
 
 import numpy as np
 
+from taskexp_lib.geometry import on_same_spot
+
 from .grader import NOT_DONE, Report, Wrong, graded, tiny_env
 
 GRID = "goal positions lie on the action grid: (env.x_bins[i], env.y_bins[k]) for uniform i, k"
+SPOT = ("the new position must not be the spot another goal names: no two blocks can meet both "
+        "(geometry.on_same_spot says when two positions are one spot); draw again")
 
 # (name, n_blocks, the blocks with a goal); case i has seed 500 + i
 CASES = [("one goal, six blocks", 6, [2]), ("three goals, six blocks", 6, [0, 3, 5]),
@@ -69,6 +74,9 @@ def one_alteration(new, goals, env, i):
     if any(np.abs(env.x_bins - x).min() > 1e-9 or np.abs(env.y_bins - y).min() > 1e-9
            for x, y in (new[b] for b in add + mod)):
         raise Wrong(f"sample {i}: {new} has a goal off the grid", GRID)
+    if any(on_same_spot(new[b], new[other]) for b in add + mod for other in new if other != b):
+        raise Wrong(f"sample {i}: {new} gives block {(add + mod)[0]} a goal on another goal's "
+                    "spot", SPOT)
     return new, add, mod
 
 
@@ -95,10 +103,10 @@ def judge_spread(seen, goals, n, samples):
         raise Wrong(f"{share['none']:.0%} of samples change nothing",
                     "a modification must move the goal (a uniform new position almost always "
                     "does)")
-    if free and min(share["add"], share["modify"]) < 0.2:
+    if free and not 0.4 <= share["add"] <= 0.6:          # 4 standard deviations of 400 draws
         raise Wrong(f"adds {share['add']:.0%}, modifies {share['modify']:.0%} of the time",
                     "with a free block, choose add or modify at random (50/50), "
-                    "so both cases occur")
+                    "so both cases occur half the time each")
     if set(free) - seen.added or set(goals) - seen.modified:
         raise Wrong(f"never added {sorted(set(free) - seen.added)}, never modified "
                     f"{sorted(set(goals) - seen.modified)}", "choose the block uniformly")
@@ -131,5 +139,5 @@ def check_ex5(alter, samples=400):
             rep.case(name, detail, None, "")
         except Wrong as wrong:
             rep.case(name, detail, wrong.problem, wrong.hint)
-    rep.done(f" ({samples} samples each: one alteration, both kinds, every block, "
-             "the whole grid)")
+    rep.done(f" ({samples} samples each: one alteration off the other goals' spots, both kinds "
+             "half the time each, every block, the whole grid)")

@@ -31,10 +31,16 @@ RELABEL_CASES = [("random", 4, 3, [1], False, False),
                  ("random", 5, 2, [0], False, False), ("random", 6, 3, [1], False, False),
                  ("random", 4, 4, [2], False, False), ("random", 5, 5, [3], False, False)]
 
-FELL = "return None when a block fell off the table (taskexp.on_table(s_T, env) is False)"
-RELABEL = ("the new goals are where traj.goals' blocks rest in s_T (only those blocks); cut at "
-           "the first t >= 1 where they hold: states[:t+1], actions[:t], success=True; return "
-           "None if they already hold at s_0 (nothing achieved)")
+# relabel's hints say what is wrong, not the line that mends it
+FELL = ("a block that fell off the table (on_table of the last state is False) makes the "
+        "trajectory no usable demonstration")
+NONE = ("None means no usable demonstration: a block fell off the table, or the new goals hold "
+        "at the first state already (nothing was achieved)")
+BLOCKS = "the new goals are for only those blocks that traj.goals names"
+WHERE = "a block's new goal is where it rests in the trajectory's last state"
+CUT = ("cut at the first step where the new goals hold: an episode toward them would have ended "
+       "there, so what follows is no part of its demonstration")
+HOLDS = "the relabelled trajectory reaches its goals by construction: it is a success"
 EQUATION_1 = ("equation (1): g* = argmax_g V(s_T, g) - V(s_0, g), "
               "with V from agent.value(observation(s, g))")
 
@@ -115,17 +121,21 @@ def select_case(select_goal, critic, i, K, ties):
 
 def trajectory_problem(got, want):
     """What differs, if anything, between the student's relabelled trajectory and the
-    reference's (its fields)."""
+    reference's (its fields) -> (problem or None, the hint for it)."""
     try:
         if sorted(got.goals) != sorted(want["goals"]):
-            return f"goal blocks {sorted(got.goals)}, expected {sorted(want['goals'])}"
-        return first(*(diff(f"goals[{b}]", got.goals[b], want["goals"][b])
-                       for b in want["goals"]),
-                     diff("states", got.states, want["states"]),
-                     diff("actions", got.actions, want["actions"]),
-                     None if bool(got.success) else f"success={got.success!r}, expected True")
+            return f"goal blocks {sorted(got.goals)}, expected {sorted(want['goals'])}", BLOCKS
+        where = first(*(diff(f"goals[{b}]", got.goals[b], want["goals"][b])
+                        for b in want["goals"]))
+        if where:
+            return where, WHERE
+        cut = first(diff("states", got.states, want["states"]),
+                    diff("actions", got.actions, want["actions"]))
+        if cut:
+            return cut, CUT
+        return (None if bool(got.success) else f"success={got.success!r}, expected True"), HOLDS
     except Exception as e:
-        return f"the returned trajectory is malformed ({type(e).__name__}: {e})"
+        return f"the returned trajectory is malformed ({type(e).__name__}: {e})", HOLDS
 
 
 def relabel_case(relabel, i, name, n, T, blocks, fall, still):
@@ -133,13 +143,13 @@ def relabel_case(relabel, i, name, n, T, blocks, fall, still):
     c = case(f"ex6/relabel/{i}", lambda: make_relabel_case(n, T, blocks, fall, still, 650 + i))
     want = c["want"]
     got, err = call(relabel, taskexp.Trajectory(**c["traj"], success=False), tiny_env(n))
+    hint = FELL if fall else NONE
     if err is None and (got is None) != (want is None):
         err = (f"got {'None' if got is None else 'a trajectory'}, "
                f"expected {'None' if want is None else 'one'}")
     elif err is None and want is not None:
-        err = trajectory_problem(got, want)
-    return (f"relabel, {name}", f"n={n}, T={T}, goal blocks {blocks}, seed {650 + i}", err,
-            FELL if fall else RELABEL)
+        err, hint = trajectory_problem(got, want)
+    return (f"relabel, {name}", f"n={n}, T={T}, goal blocks {blocks}, seed {650 + i}", err, hint)
 
 
 @graded

@@ -140,9 +140,29 @@ def ppo_variant(sign=1.0, tie="<=", through_clip=False, outer=np.minimum):
     return ppo_loss
 
 
+def others_spots(goals, b):
+    return [p for other, p in goals.items() if other != b]
+
+
 def alter_always_add(goals, env, rng):
     new, free = dict(goals), [b for b in range(env.n_blocks) if b not in goals]
     b = int(rng.choice(free)) if free else int(rng.choice(list(goals)))
+    new[b] = taskexp.random_position(env, rng, others_spots(goals, b))
+    return new
+
+
+def alter_mostly_add(goals, env, rng):
+    """Adds three times in four where a block is free: both kinds occur, not half the time each."""
+    new, free = dict(goals), [b for b in range(env.n_blocks) if b not in goals]
+    b = int(rng.choice(free)) if free and rng.random() < 0.75 else int(rng.choice(list(goals)))
+    new[b] = taskexp.random_position(env, rng, others_spots(goals, b))
+    return new
+
+
+def alter_on_any_spot(goals, env, rng):
+    """A new position anywhere on the grid, another goal's spot included."""
+    new, free = dict(goals), [b for b in range(env.n_blocks) if b not in goals]
+    b = int(rng.choice(free)) if free and rng.random() < 0.5 else int(rng.choice(list(goals)))
     new[b] = float(env.x_bins[rng.integers(37)]), float(env.y_bins[rng.integers(env.n_blocks)])
     return new
 
@@ -253,6 +273,8 @@ WRONG = {   # (exercise, the student's functions with one mistake, a phrase the 
         ("ex4", [ppo_variant(through_clip=True)], "no gradient"),
     "ex4 max instead of min": ("ex4", [ppo_variant(outer=np.maximum)], "min of the two"),
     "ex5 always add": ("ex5", [alter_always_add], "50/50"),
+    "ex5 adds three times in four": ("ex5", [alter_mostly_add], "half the time each"),
+    "ex5 a goal on another goal's spot": ("ex5", [alter_on_any_spot], "on_same_spot"),
     "ex5 two alterations": ("ex5", [alter_two_changes], "ONE"),
     "ex5 changes its input": ("ex5", [alter_in_place], "dict(goals)"),
     "ex5 off the grid": ("ex5", [alter_off_grid], "grid"),
@@ -367,9 +389,9 @@ def test_ex6_introduction_says_when_relabel_returns_none_in_a_sentence(tmp_path)
         with open(path) as f:
             intro = "".join(json.load(f)["cells"][0]["source"])
         assert "no usable demonstration, return" not in intro, path
-        assert re.search(r"`relabel` returns `None` when the trajectory is no usable "
-                         r"demonstration: when a block fell off the table", " ".join(intro.split())
-                         ), intro
+        assert re.search(r"Return `None` when the trajectory is no usable demonstration: a "
+                         r"block fell off the table", " ".join(intro.split())), intro
+        assert "states[:t+1]" not in intro, "the contract, not the line that meets it"
 
 
 def test_checks_write_nothing_to_stderr(capsys):

@@ -200,3 +200,24 @@ def test_usage_shows_the_instructor_commands_only_in_the_repository(kit_dir):
     assert "release OUT" in repository.stderr and "course DIR" in repository.stderr
     assert "release" not in student.stderr and "course DIR" not in student.stderr, \
         student.stderr
+
+
+def paths_named(text):
+    """The file paths a text names in backticks: words with a folder or a file ending."""
+    words = re.findall(r"`([^`\s]+)`", text)
+    return {w for w in words if re.fullmatch(r"[\w./-]+\.(py|ipynb|json|txt|md)|[\w.-]+/[\w./-]*",
+                                             w)}
+
+
+def test_a_kit_notebook_names_no_file_the_kit_lacks(kit_dir):
+    """What a student reads in a kit names only files the kit has (a path from the kit's root, or
+    from the course folder), and the test sees a path that is missing."""
+    for name in exercises.NOTEBOOKS.values():
+        with open(os.path.join(kit_dir, name)) as f:
+            text = "\n".join("".join(c["source"]) for c in json.load(f)["cells"]
+                             if c["cell_type"] == "markdown")
+        missing = [p for p in paths_named(text) if not any(
+            os.path.exists(os.path.join(kit_dir, where, p)) for where in ("", "course"))]
+        assert missing == [], (name, missing)
+    assert paths_named("run `python x.py`, see `course/notebooks/measure_ex7.py` and "
+                       "`tests/`") == {"course/notebooks/measure_ex7.py", "tests/"}
