@@ -395,9 +395,10 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     if cfg.other_orders:
         with bar(total=sum(len(d.actions) > 1 for d in demos), desc="other orders") as progress:
             other = other_orders(demos, envs, rng, progress)
-    longest = max((len(d.actions) for d in demos), default=0)           # the replay passes
-    with bar(total=longest, desc="parts") as progress:                 # none for goal_parts 0
-        add_parts(demos, envs, rng, cfg.goal_parts, progress)
+    if cfg.goal_parts:                           # off by default: then no bar, and no draw
+        longest = max((len(d.actions) for d in demos), default=0)       # the replay passes
+        with bar(total=longest, desc="parts") as progress:
+            add_parts(demos, envs, rng, cfg.goal_parts, progress)
     # picks_reached: the share of equation (1)'s picks that the policy reaches from s_T, the
     # leading indicator of whether V(s, g) tells a reachable goal from an unreachable one
     info = dict(attempts=len(batch), successful=len(found), joined=sum(reached),
