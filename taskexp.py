@@ -395,7 +395,7 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     if cfg.other_orders:
         with bar(total=sum(len(d.actions) > 1 for d in demos), desc="other orders") as progress:
             other = other_orders(demos, envs, rng, progress)
-    if cfg.goal_parts:                           # off by default: then no bar, and no draw
+    if cfg.goal_parts:                   # off by default: no bar then (and add_parts draws nothing)
         longest = max((len(d.actions) for d in demos), default=0)       # the replay passes
         with bar(total=longest, desc="parts") as progress:
             add_parts(demos, envs, rng, cfg.goal_parts, progress)

@@ -99,7 +99,7 @@ def judge_spread(seen, goals, n, samples):
     every block, and (nearly) every x-bin and layer."""
     free = [b for b in range(n) if b not in goals]
     share = {k: seen.kinds.count(k) / samples for k in ("add", "modify", "none")}
-    if share["none"] > 0.05:
+    if share["none"] > 0.08:        # a modify may land on its old spot: 1 in 37 with one layer
         raise Wrong(f"{share['none']:.0%} of samples change nothing",
                     "a modification must move the goal (a uniform new position almost always "
                     "does)")

@@ -135,7 +135,8 @@ def trajectory_problem(got, want):
             return cut, CUT
         return (None if bool(got.success) else f"success={got.success!r}, expected True"), HOLDS
     except Exception as e:
-        return f"the returned trajectory is malformed ({type(e).__name__}: {e})", HOLDS
+        return (f"the returned trajectory is malformed ({type(e).__name__}: {e})",
+                "return a Trajectory(goals, states, actions, success), or None")
 
 
 def relabel_case(relabel, i, name, n, T, blocks, fall, still):
