@@ -480,6 +480,13 @@ class Test(NamedTuple):
     worlds: list
 
 
+def shapes_in_world(cfg, n, pool=None):
+    """The Test of the held-out shapes in new worlds of n blocks (their physics in `pool`), on the
+    fixed scenes eval_tasks makes for that world."""
+    worlds = run_worlds(replace(cfg, n_blocks=n), pool)[0]
+    return Test(eval_tasks(cfg, worlds[0]), worlds)
+
+
 def zero_shot_tests(cfg, envs, pool=None):
     """Every Test a run makes after every round, by the name results.json records it under:
 
@@ -490,10 +497,9 @@ def zero_shot_tests(cfg, envs, pool=None):
                 blocks (their physics in `pool`), tried with the weights learnt in this one
     """
     evals, families = eval_tasks(cfg, envs[0]), family_tasks(cfg, envs[0])
-    others = {str(n): run_worlds(replace(cfg, n_blocks=n), pool)[0] for n in cfg.eval_blocks}
     return dict(eval=Test(evals, envs),
                 families={f: Test(tasks, envs) for f, tasks in families.items()},
-                blocks={n: Test(eval_tasks(cfg, w[0]), w) for n, w in others.items()})
+                blocks={str(n): shapes_in_world(cfg, n, pool) for n in cfg.eval_blocks})
 
 
 def zero_shot(agent, tests, bar=silent):

@@ -16,18 +16,17 @@ import argparse
 import json
 import os
 import warnings
-from dataclasses import replace
 
 import numpy as np
 
 import taskexp
 from agent import Agent, OtherWorldWarning
-from env2d import physics_pool, run_worlds
+from env2d import physics_pool
 from taskexp_lib import one_blas_thread
 from taskexp_lib.checkpoint import save_json
 from taskexp_lib.config import saved_config
 from taskexp_lib.rollout import run_episodes
-from taskexp_lib.shapes import eval_tasks, site_free
+from taskexp_lib.shapes import site_free
 
 
 def split_by_site(agent, tasks, worlds):
@@ -43,13 +42,6 @@ def split_by_site(agent, tasks, worlds):
     return out
 
 
-def world_of(cfg, n, pool=None):
-    """The held-out shapes' fixed scenes in a world of n blocks, and its worlds: the Test that
-    taskexp.zero_shot_tests makes for it."""
-    worlds = run_worlds(replace(cfg, n_blocks=n), pool)[0]
-    return taskexp.Test(eval_tasks(cfg, worlds[0]), worlds)
-
-
 def record(run, workers=2):
     """Each round's success in the worlds of cfg.eval_blocks, into the run's results.json, where
     and as taskexp.train records it (rounds[k]["blocks"], after "families")."""
@@ -58,7 +50,8 @@ def record(run, workers=2):
         results = json.load(f)
     cfg = saved_config(results["config"])              # a run made before: Config's eval_blocks
     with physics_pool(workers, cfg.action == "drop") as pool:
-        tests = {str(n): world_of(cfg, n, pool) for n in cfg.eval_blocks}    # once, every round
+        tests = {str(n): taskexp.shapes_in_world(cfg, n, pool)               # once, every round
+                 for n in cfg.eval_blocks}
         for k, rnd in enumerate(results["rounds"]):
             agent = Agent.load(os.path.join(run, f"round{k}.npz"))
             blocks = taskexp.zero_shot(agent, tests)
@@ -93,7 +86,7 @@ def main():
     print("|---|---|---|---|---|---|")
     warnings.simplefilter("ignore", OtherWorldWarning)            # the table says so
     for n in counts:                                # the run's own world the same way
-        tasks, worlds = world_of(cfg, n)
+        tasks, worlds = taskexp.shapes_in_world(cfg, n)
         for shape, (won, free, on_free, on_busy) in split_by_site(agent, tasks, worlds).items():
             print(f"| {n} | {shape} | {won} | {free} | {on_free} | {on_busy} |")
 
