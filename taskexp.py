@@ -360,21 +360,18 @@ def relabel(traj, env):
     return cut(traj, goals, env.threshold)
 
 
-def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=silent):
-    """One round of sec 4.2. tasks: the previous round's tasks. Returns (demos, info).
+def expansion_step(agent, found, cfg, env, short_envs, rng, pieces, bar=silent):
+    """Steps 2 and 3 of sec 4.2 for the successful trajectories `found` (s0 -> sT, in order).
 
-    1. run the policy on the tasks and keep the successful trajectories s0 -> sT;
-    2. for each, draw K candidates with one alteration and pick g* by equation (1);
-    3. run the policy from sT toward g*: on success the joined trajectory demonstrates s0 -> g*,
-       on failure the joined trajectory is relabelled with the goal it did reach;
-    4. not in the paper: the moves of each also in another order that physics allows (orders.py),
-       and cfg.goal_parts parts of its goals, each with the moves it needs (hindsight.py).
+    For each: K = cfg.candidates one-alteration candidates (`candidates`, with pieces.alter), g*
+    among them by pieces.select_goal (equation 1, or the ablation cfg.select), and one episode
+    from its sT toward g* in the short worlds `short_envs`. On success the joined trajectory
+    demonstrates s0 -> g*; on failure pieces.relabel makes it a demonstration of what it did
+    reach, or None, which is dropped. The random draws come in this order: every candidate, then
+    the episodes, all in one run_episodes call (the order a run's bytes depend on).
+    Returns (demos, reached): the demonstrations in the order of `found`, and per trajectory of
+    `found` whether its episode reached g*.
     """
-    env, pieces = envs[0], pieces or Pieces()
-    batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
-    with bar(total=len(batch), desc="collect") as progress:
-        found = [t for t in run_episodes(agent, batch, envs, rng, progress=progress,
-                                         values=False) if t.success]
     asked = [candidates(traj, env, rng, cfg, pieces.alter) for traj in found]
     with bar(total=len(found), desc="eq. (1)") as progress:
         def pick(ag, job):      # equation (1) draws nothing at random: both cores share the work
@@ -391,6 +388,25 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
         demo = joined if more.success else pieces.relabel(joined, env)
         if demo is not None:
             demos.append(demo)
+    return demos, reached
+
+
+def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=silent):
+    """One round of sec 4.2. tasks: the previous round's tasks. Returns (demos, info).
+
+    1. run the policy on the tasks and keep the successful trajectories s0 -> sT;
+    2. for each, draw K candidates with one alteration and pick g* by equation (1);
+    3. run the policy from sT toward g*: on success the joined trajectory demonstrates s0 -> g*,
+       on failure the joined trajectory is relabelled with the goal it did reach;
+    4. not in the paper: the moves of each also in another order that physics allows (orders.py),
+       and cfg.goal_parts parts of its goals, each with the moves it needs (hindsight.py).
+    """
+    env, pieces = envs[0], pieces or Pieces()
+    batch = [tasks[i] for i in rng.integers(len(tasks), size=cfg.expand_episodes)]
+    with bar(total=len(batch), desc="collect") as progress:
+        found = [t for t in run_episodes(agent, batch, envs, rng, progress=progress,
+                                         values=False) if t.success]
+    demos, reached = pieces.expansion_step(agent, found, cfg, env, short_envs, rng, pieces, bar)
     other = 0
     if cfg.other_orders:
         with bar(total=sum(len(d.actions) > 1 for d in demos), desc="other orders") as progress:
@@ -433,27 +449,44 @@ def generated_stats(demos, info, cfg, log=print):
 # sec 4.3: self-distillation
 # --------------------------------------------------------------------------------------------
 
+def distillation_data(run, demos, cfg):
+    """Sec 4.3: what BC learns from in a round -> (obs (N, n, 6), actions (N, 3)). The steps of
+    the kept buffer (run.buffer_obs, run.buffer_act), then those of the new demonstrations, each
+    followed by its other order and its parts where it has them (hindsight.learnt_from); of all
+    these, the newest cfg.buffer_size (the memory bound of a long run). Draws nothing."""
+    new_obs, new_act = demo_arrays(learnt_from(demos))
+    return (np.concatenate([run.buffer_obs, new_obs])[-cfg.buffer_size:],
+            np.concatenate([run.buffer_act, new_act])[-cfg.buffer_size:])
+
+
+def distillation_tasks(run, demos, rng):
+    """Sec 4.3: the tasks PPO trains on in a round -> (new, old). new: (s0, goals) of every new
+    demonstration, each followed by those of its parts (an other order is the same task); old: as
+    many tasks again, drawn uniformly with replacement from every earlier task (run.all_tasks),
+    so that PPO keeps the skills of earlier rounds while it learns the new tasks."""
+    # s0 a copy: a view would keep the whole episode's states alive as long as the task
+    new = [(t.states[0].copy(), t.goals) for d in demos for t in (d, *d.parts)]
+    old = [run.all_tasks[i] for i in rng.integers(len(run.all_tasks), size=len(new))]
+    return new, old
+
+
 def self_distill(agent, run, demos, k, cfg, envs, short_envs, rng, pieces, bar=silent,
                  log=print):
-    """Sec 4.3, in round k >= 1: BC on the new demos mixed with the kept ones, then PPO on the new
-    tasks mixed with as many old ones. The buffer and the task list keep the newest
-    cfg.buffer_size entries (the memory bound of a long run). Updates `run`; returns the round's
-    BC losses and PPO success, or nothing when the expansion generated no demonstration."""
+    """Sec 4.3, in round k >= 1: BC on the new demos mixed with the kept ones
+    (distillation_data), then PPO on the new tasks mixed with as many old ones
+    (distillation_tasks). The task list, like the buffer, keeps the newest cfg.buffer_size
+    entries. Updates `run`; returns the round's BC losses and PPO success, or nothing when the
+    expansion generated no demonstration."""
     if not demos:
         log("  no demonstrations generated; keeping the current policy")
         return {}
-    new_obs, new_act = demo_arrays(learnt_from(demos))
-    run.buffer_obs = np.concatenate([run.buffer_obs, new_obs])[-cfg.buffer_size:]
-    run.buffer_act = np.concatenate([run.buffer_act, new_act])[-cfg.buffer_size:]
+    run.buffer_obs, run.buffer_act = pieces.distillation_data(run, demos, cfg)
     # round k's epochs: the k-th of cfg.distill_epochs, and its last for every round after
     epochs = cfg.distill_epochs[min(k, len(cfg.distill_epochs)) - 1]
     bc_loss = agent.bc(run.buffer_obs, run.buffer_act, epochs, cfg.bc_batch, cfg.bc_lr, rng,
                        bar=bar)
     log(f"  BC on {len(run.buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
-    # the tasks of the new demonstrations and of their parts; s0 a copy: a view would keep the
-    # whole episode's states alive as long as the task
-    new_tasks = [(t.states[0].copy(), t.goals) for d in demos for t in (d, *d.parts)]
-    old = [run.all_tasks[i] for i in rng.integers(len(run.all_tasks), size=len(new_tasks))]
+    new_tasks, old = pieces.distillation_tasks(run, demos, rng)
     ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short_envs, rng, "PPO distil",
                         pieces=pieces, bar=bar)
     run.all_tasks = (run.all_tasks + new_tasks)[-cfg.buffer_size:]
@@ -528,15 +561,20 @@ def direct_ppo(agent, evals, cfg, envs, short_envs, rng, pieces, bar=silent):
 @dataclass
 class Pieces:
     """The parts of the method that the course's exercises ask a student to write. train() uses
-    these; exercise 7 passes the student's mlp_backward, gae and ppo_loss instead. alter and
-    select_goal are called with the library's extra arguments too (restrict, p_add; the mode of
-    the Table 3 ablations), which a student's version from exercises 5 and 6 does not take."""
+    these; exercise 7 passes the student's mlp_backward, gae and ppo_loss instead, the capstone
+    (exercise 12) their alter, select_goal, relabel, expansion_step and distillation data.
+    alter and select_goal are called with the library's extra arguments too (restrict, p_add;
+    the mode of the Table 3 ablations), which a student's version from exercises 5 and 6 does
+    not take."""
     mlp_backward: Callable = mlp_backward
     gae: Callable = agent_lib.gae
     ppo_loss: Callable = agent_lib.ppo_loss
     alter: Callable = alter
     select_goal: Callable = select_goal
     relabel: Callable = relabel
+    expansion_step: Callable = expansion_step
+    distillation_data: Callable = distillation_data
+    distillation_tasks: Callable = distillation_tasks
 
 
 def make_agent(cfg, mlp_backward=mlp_backward):

@@ -45,7 +45,10 @@ from .ex5 import check_ex5
 from .ex6 import DistanceCritic, check_ex6
 from .ex7 import EX7, base_policy_success, check_ex7, student_pieces, unfinished
 from .ex8 import check_ex8
+from .ex9 import check_ex9
+from .ex10 import check_ex10
+from .ex11 import ablation_table, check_ex11
 from .grader import Report, numerical_grad, passes, tiny_env
 from .notebooks import NOTEBOOK_DIR, action_dist, blank, functions, load, write_notebooks
-from .problems import EX7_NEEDS, FUNCTIONS, NOTEBOOKS, POINTS
+from .problems import EX7_NEEDS, FUNCTIONS, MANUAL, NOTEBOOKS, POINTS
 from .reference import REFERENCE

@@ -48,6 +48,9 @@ EXERCISED = {
     "ex5": [("taskexp", "alter"), ("taskexp", "random_position")],
     "ex6": [("taskexp", "select_goal"), ("taskexp", "relabel"), ("taskexp_lib.rollout", "cut")],
     "ex8": [("taskexp_lib.nn", "softmax_backward"), ("taskexp_lib.nn", "SelfAttention.backward")],
+    "ex9": [("taskexp", "join"), ("taskexp", "expansion_step")],
+    "ex10": [("taskexp", "distillation_data"), ("taskexp", "distillation_tasks")],
+    "ex11": [("taskexp_lib.features", "one_drop_away")],       # and ex6's select_goal, with modes
 }
 
 
@@ -123,6 +126,8 @@ def _texts(folder):
     for dirpath, _, files in os.walk(folder):
         for name in files:
             path = os.path.join(dirpath, name)
+            if name.endswith(".npz"):                     # weights: numbers, no code
+                continue
             with open(path) as f:
                 text = f.read()
             if name.endswith(".ipynb"):
@@ -192,6 +197,8 @@ def write_kit(out, student=True):
             f.write(stub(source, module))
     for path in glob.glob(os.path.join(COURSE, "*.py")):
         shutil.copyfile(path, os.path.join(kit_course, os.path.basename(path)))
+    shutil.copytree(os.path.join(COURSE, "data"), os.path.join(kit_course, "data"),
+                    dirs_exist_ok=True)                 # the round-0 agent of exercises 11 and 12
     with open(os.path.join(kit_course, "vectors.json"), "w") as f:
         json.dump(dict(about="the checks' cases: inputs and expected outputs, recorded from the "
                              "reference solutions by python -m course release",
@@ -247,7 +254,11 @@ WHAT = {"ex1": "the MLP backward pass", "ex2": "log-probability and entropy of t
         "ex4": "PPO's clipped loss and its gradient", "ex5": "one-alteration task sampling "
         "(sec 4.2)", "ex6": "goal selection by equation (1), hindsight relabelling",
         "ex7": "nothing new: your ex1-ex4 train the base policy (15 s to a minute)",
-        "ex8": "the backward pass of a self-attention layer (the paper's network, sec 3)"}
+        "ex8": "the backward pass of a self-attention layer (the paper's network, sec 3)",
+        "ex9": "the expansion step: candidates, equation (1), the run from s_T, join or relabel "
+        "(sec 4.2)", "ex10": "the data of self-distillation: BC's buffer, PPO's new and old "
+        "tasks (sec 4.3)", "ex11": "equation (1) against its ablations, with a real round-0 "
+        "critic: predict, measure, explain (Table 3)"}
 
 README = """# Task expansion from the inside: the student kit
 

@@ -74,13 +74,14 @@ def action_dist(folder=None):
                                where=f"exercise 2 ({NOTEBOOKS['ex2']})")
 
 
-def blank(source):
+def blank(source, text=False):
     """nbgrader's rule: each ### BEGIN SOLUTION ... ### END SOLUTION block (markers included)
-    becomes "# YOUR CODE HERE / raise NotImplementedError()" at the marker's indentation."""
+    becomes "# YOUR CODE HERE / raise NotImplementedError()" at the marker's indentation, or in
+    a markdown answer (text=True) "YOUR ANSWER HERE"."""
+    stub = (lambda i: f"{i}YOUR ANSWER HERE") if text else (
+        lambda i: f"{i}# YOUR CODE HERE\n{i}raise NotImplementedError()")
     return re.sub(r"^([ \t]*)### BEGIN SOLUTION[^\n]*\n.*?^[ \t]*### END SOLUTION[^\n]*(\n|$)",
-                  lambda m: (f"{m.group(1)}# YOUR CODE HERE\n"
-                             f"{m.group(1)}raise NotImplementedError(){m.group(2)}"),
-                  source, flags=re.M | re.S)
+                  lambda m: stub(m.group(1)) + m.group(2), source, flags=re.M | re.S)
 
 
 def write_notebooks(out_dir, student=True, src_dir=NOTEBOOK_DIR):
@@ -92,9 +93,11 @@ def write_notebooks(out_dir, student=True, src_dir=NOTEBOOK_DIR):
         with open(path) as f:
             nb = json.load(f)
         for cell in nb["cells"]:
-            if cell["cell_type"] == "code":
-                if student:
-                    cell["source"] = blank("".join(cell["source"])).splitlines(keepends=True)
+            code = cell["cell_type"] == "code"
+            if student and (code or cell["metadata"]["nbgrader"].get("solution")):
+                cell["source"] = blank("".join(cell["source"]), text=not code).splitlines(
+                    keepends=True)
+            if code:
                 cell["outputs"], cell["execution_count"] = [], None
         written.append(os.path.join(out_dir, os.path.basename(path)))
         with open(written[-1], "w") as f:

@@ -7,7 +7,7 @@ whose checks read recorded cases) never does.
 """
 import agent
 import taskexp
-from taskexp_lib import nn
+from taskexp_lib import features, nn
 
 from .ex2 import reference_logp_entropy, reference_logp_entropy_backward
 from .ex8 import reference_attention_backward
@@ -22,4 +22,9 @@ REFERENCE = dict(
     alter=taskexp.alter,                                            # ex5
     select_goal=taskexp.select_goal,                                # ex6
     relabel=taskexp.relabel,
-    attention_backward=reference_attention_backward)                # ex8
+    attention_backward=reference_attention_backward,                # ex8
+    join=taskexp.join,                                              # ex9
+    expansion_step=taskexp.expansion_step,
+    distillation_data=taskexp.distillation_data,                    # ex10
+    distillation_tasks=taskexp.distillation_tasks,
+    one_drop_away=features.one_drop_away)                           # ex11 (and select_goal)

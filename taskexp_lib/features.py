@@ -7,7 +7,7 @@ comparing blocks (self-attention does). The world's geometry comes from geometry
 """
 import numpy as np
 
-from .geometry import BLOCK_H, BLOCK_W, TABLE_X, THRESHOLD
+from .geometry import BLOCK_H, BLOCK_W, TABLE_X, THRESHOLD, observation
 
 N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the table
 
@@ -106,3 +106,17 @@ def relations(x, y, gx, gy, g, at_goal):
         covered=any_j(near(x, x, w) & near(y - h, y, h / 2)))
     out["needs_support"] = pending * (1.0 - out["supported"])
     return out
+
+
+def one_drop_away(state, goals, threshold=THRESHOLD):
+    """True when every goal of `goals` not yet met in `state` (its block's centre `threshold` or
+    farther from the target) can be met by one drop of its block: no other block overlaps its
+    spot (relations' "blocked") and the spot is supported, by the table or by a block right
+    under it ("supported"). The test of what one more action can meet, by which the course and
+    lab/bench/feasible_goals.py judge the goals that equation (1) and its ablations pick."""
+    o = observation(state, goals)[None].astype(np.float64)
+    x, y, gx, gy, g = (o[..., j] for j in (0, 1, 3, 4, 5))
+    at_goal = g * (np.hypot(gx - x, gy - y) < threshold)
+    facts = relations(x, y, gx, gy, g, at_goal)
+    pending = g * (1.0 - at_goal)                   # a goal met already needs no drop
+    return bool((facts["needs_support"] + pending * facts["blocked"]).max() == 0)

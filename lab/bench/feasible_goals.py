@@ -28,17 +28,8 @@ import taskexp  # noqa: E402
 from agent import Agent  # noqa: E402
 from env2d import run_worlds  # noqa: E402
 from taskexp_lib import one_blas_thread  # noqa: E402
-from taskexp_lib.features import relations  # noqa: E402
-from taskexp_lib.geometry import THRESHOLD, observation  # noqa: E402
+from taskexp_lib.features import one_drop_away as feasible  # noqa: E402
 from taskexp_lib.rollout import run_episodes  # noqa: E402
-
-
-def feasible(state, goals):
-    """Every goal of `goals` not met in `state` can be met by one drop (see the module doc)."""
-    o = observation(state, goals)[None].astype(np.float64)
-    x, y, gx, gy, g = (o[..., j] for j in (0, 1, 3, 4, 5))
-    rel = relations(x, y, gx, gy, g, g * (np.hypot(gx - x, gy - y) < THRESHOLD))
-    return rel["needs_support"].max() == 0 and rel["blocked"].max() == 0
 
 
 def measure(checkpoint, tasks=600, seed=5, select="ours", restrict=True,
