@@ -1,7 +1,7 @@
 """course -- the problem set of taskexp: a grader, a check per exercise, the
 notebook loader, the student kit and the command line.
 
-Eight exercises (course/notebooks/exN_*.ipynb), each a function the student writes; the
+Twelve exercises (course/notebooks/exNN_*.ipynb), most of them functions the student writes; the
 reference solution is the library's own code (REFERENCE), wrapped in the student's signature only
 where the library has it as a method:
 
@@ -18,21 +18,31 @@ where the library has it as a method:
        relabel(traj, env) -> Trajectory or None                taskexp.relabel
   ex7  behavioural: the student's ex1-ex4 train the base policy (sec 4.1)
   ex8  attention_backward(params, cache, dout) -> (grads, dx)  taskexp_lib.nn.SelfAttention.backward
+  ex9  join(first, second, goals, success) -> Trajectory      taskexp.join        (sec 4.2)
+       expansion_step(agent, found, cfg, env, short_envs, rng, pieces)
+           -> (demos, reached)                                 taskexp.expansion_step
+  ex10 distillation_data(run, demos, cfg) -> (obs, actions)   taskexp.distillation_data (4.3)
+       distillation_tasks(run, demos, rng) -> (new, old)       taskexp.distillation_tasks
+  ex11 select_goal(agent, s0, sT, candidates, mode) -> index  taskexp.select_goal (Table 3)
+       one_drop_away(state, goals, threshold) -> bool          taskexp_lib.features.one_drop_away
+       and two written answers, graded by hand (MANUAL)
+  ex12 behavioural, the capstone: every piece above runs two rounds of the method (sec 4.2-4.3)
 
 check_exN(...) prints PASS, or raises AssertionError with the failing case, expected vs got and a
 hint; it writes nothing to stderr (nbgrader would give a graded cell 0 points). Deterministic.
 In a student kit (release), the library's reference solutions are stubs and the checks read
-recorded cases (vectors.py); exercise 4 and 7 use the student's exercise 2 (action_dist).
+recorded cases (vectors.py); exercises 4, 7 and 12 use the student's exercise 2 (action_dist).
 
     python -m course ex3 NOTEBOOK   # exec the notebook's solution cells, check_ex3
     python -m course all FOLDER     # every exercise, the total; exit 1 if one fails
     python -m course release OUT    # the student kit
     python -m course course DIR     # an nbgrader course that makes the same kit
 
-grader.py (what every check is made of), ex1.py ... ex8.py (an exercise each: its cases, its
-check, its reference wrapper if any; ex7 trains), checks.py (CHECKS), reference.py (REFERENCE),
-dist.py (ActionDist from ex2), notebooks.py (the loader), kit.py (kit, course), vectors.py
-(recorded cases), problems.py (notebooks, functions, points), __main__.py (the command line).
+grader.py (what every check is made of), ex1.py ... ex12.py (an exercise each: its cases, its
+check, its reference wrapper if any; ex7 and ex12 train), checks.py (CHECKS), reference.py
+(REFERENCE), dist.py (ActionDist from ex2), notebooks.py (the loader), kit.py (kit, course),
+vectors.py (recorded cases), problems.py (notebooks, functions, points), __main__.py (the command
+line), data/round0.npz (the round-0 agent of exercises 11 and 12).
 """
 from . import kit
 from .checks import CHECKS
@@ -48,7 +58,8 @@ from .ex8 import check_ex8
 from .ex9 import check_ex9
 from .ex10 import check_ex10
 from .ex11 import ablation_table, check_ex11
+from .ex12 import CAPSTONE, capstone_pieces, check_ex12, grow
 from .grader import Report, numerical_grad, passes, tiny_env
 from .notebooks import NOTEBOOK_DIR, action_dist, blank, functions, load, write_notebooks
-from .problems import EX7_NEEDS, FUNCTIONS, MANUAL, NOTEBOOKS, POINTS
+from .problems import BEHAVIOURAL, CAPSTONE_NEEDS, EX7_NEEDS, FUNCTIONS, MANUAL, NOTEBOOKS, POINTS
 from .reference import REFERENCE

@@ -15,13 +15,14 @@ from .checks import CHECKS
 from .grader import passes
 from .kit import course, release
 from .notebooks import functions
-from .problems import NOTEBOOKS, POINTS
+from .problems import BEHAVIOURAL, MANUAL, NOTEBOOKS, POINTS
 from .vectors import in_kit
 
 STUDENT_USAGE = """usage: python -m course COMMAND
-  ex1 .. ex6, ex8 NOTEBOOK   check one exercise in your notebook, e.g. ex3 ex3_gae.ipynb
+  ex1 .. ex11 NOTEBOOK  check one exercise in your notebook, e.g. ex3 ex03_gae.ipynb
   ex7 FOLDER            exercise 7: trains with the ex1-ex4 notebooks in FOLDER (e.g. .)
-  all FOLDER            check all eight notebooks in FOLDER, then the total"""
+  ex12 FOLDER           exercise 12: two rounds with the ex5, ex6, ex9, ex10 notebooks
+  all FOLDER            check every notebook in FOLDER, then the total"""
 INSTRUCTOR_USAGE = """
   release OUT           (instructors) write the student kit into OUT
   course DIR            (instructors) write an nbgrader course into DIR"""
@@ -34,7 +35,7 @@ def usage():
 
 
 def check(exercise, notebook):
-    """Run one exercise's check on a notebook (ex7: a folder) -> passed (True/False); prints
+    """Run one exercise's check on a notebook (ex7, ex12: a folder) -> passed (True/False); prints
     PASS, or FAIL and what failed."""
     try:
         fns = functions(exercise, notebook)
@@ -50,9 +51,11 @@ def check(exercise, notebook):
 
 def check_all(folder):
     """Every exercise on the notebooks in `folder`, then the total -> all passed."""
-    passed = {ex: check(ex, os.path.join(folder, NOTEBOOKS[ex]) if ex != "ex7" else folder)
+    passed = {ex: check(ex, folder if ex in BEHAVIOURAL else os.path.join(folder, NOTEBOOKS[ex]))
               for ex in NOTEBOOKS}
     points = sum(POINTS[ex] for ex, ok in passed.items() if ok)
+    print(f"written answers, graded by hand: {', '.join(f'{ex} {p}' for ex, p in MANUAL.items())}"
+          " points, not counted below")
     print(f"total: {points}/{sum(POINTS.values())} points; {sum(passed.values())} of "
           f"{len(passed)} exercises pass" + ("" if all(passed.values()) else
           f" (fail: {', '.join(ex for ex, ok in passed.items() if not ok)})"))
@@ -69,9 +72,10 @@ def main(argv=None):
             return 2
         return 0
     if cmd in [*NOTEBOOKS, "all"] and not rest:
-        what = ("the folder of your notebooks" if cmd in ("all", "ex7") else
+        folder = cmd == "all" or cmd in BEHAVIOURAL
+        what = ("the folder of your notebooks" if folder else
                 f"your notebook, e.g. {NOTEBOOKS[cmd]}")
-        print(f"which {'folder' if cmd in ('all', 'ex7') else 'notebook'}? "
+        print(f"which {'folder' if folder else 'notebook'}? "
               f"python -m course {cmd} PATH, with PATH {what} ('.' in the "
               "student kit's folder)", file=sys.stderr)
         return 2

@@ -9,7 +9,7 @@ Measured (course/notebooks/measure_ex7.py, one core, 12-21 s a run): the library
 reach 59-75.5% over seeds 0-4 (+45 to +60 points); on seed 0 a sign-flipped ppo_loss, an inverted
 clip mask, a surrogate without gradient, a sign-flipped GAE delta and an MLP backward without
 tanh' all end at 0-8.5%, below their BC start.  The full table is in
-course/notebooks/ex7_base_policy.ipynb.
+course/notebooks/ex07_base_policy.ipynb.
 """
 import time
 
@@ -25,7 +25,7 @@ from .dist import NotDone
 from .grader import Report, graded
 from .problems import EX7_NEEDS, FUNCTIONS, NOTEBOOKS
 
-# measured: see course/notebooks/ex7_base_policy.ipynb
+# measured: see course/notebooks/ex07_base_policy.ipynb
 EX7 = dict(seed=0, n_blocks=4, hidden=64, demos=3000, bc_epochs=8, ppo_steps=30000, eval_tasks=200,
            threshold=0.40, min_gain=0.20)
 # the agent those figures were measured with: the deep set over hand relations, in float64

@@ -221,7 +221,8 @@ def expansion_case(expansion_step, i, name, n, K, count):
             err, hint = f"demos holds None ({sum(d is None for d in demos)} times)", DROP
         elif [bool(r) for r in reached] != c["reached"]:
             err, hint = (f"reached {[bool(r) for r in reached]}, expected {c['reached']}",
-                         REACHED if len(reached) != len(c["reached"]) else PICK)
+                         REACHED if len(reached) != len(c["reached"]) else
+                         f"{REACHED}; a wrong g* changes it too: {PICK}")
         elif len(demos) != len(want):
             err, hint = f"{len(demos)} demonstrations, expected {len(want)}", DROP
         else:

@@ -24,7 +24,7 @@ import numpy as np
 from . import vectors
 from .checks import CHECKS
 from .notebooks import COURSE, NOTEBOOK_DIR, PACKAGES, REPOSITORY, write_notebooks
-from .problems import FUNCTIONS, NOTEBOOKS, POINTS
+from .problems import FUNCTIONS, MANUAL, NOTEBOOKS, POINTS
 
 # the modules the wheel installs (pyproject.toml), as dotted names
 LIBRARY = ["taskexp", "env2d", "agent"] + sorted(
@@ -152,8 +152,8 @@ def answers_in(folder):
 
 
 def record_vectors():
-    """Every case of the checks of ex1-ex6 and ex8, made on the full library -> {key: encoded
-    case}."""
+    """Every case of the checks with recorded cases (all but the behavioural ex7 and ex12), made
+    on the full library -> {key: encoded case}."""
     if vectors.in_kit():
         raise ValueError("this is a student kit, which has no reference solutions: "
                          "make kits from the repository")
@@ -162,7 +162,7 @@ def record_vectors():
         raise NotImplementedError()
     with vectors.recording() as cases, contextlib.redirect_stdout(io.StringIO()):
         for ex, check in CHECKS.items():
-            if ex in FUNCTIONS:                           # ex7 has no cases: it trains
+            if ex in FUNCTIONS:                       # ex7 and ex12 have no cases: they train
                 with contextlib.suppress(AssertionError):  # each case is made before it is run
                     check(*[not_mine] * len(FUNCTIONS[ex]))
     return cases
@@ -258,13 +258,16 @@ WHAT = {"ex1": "the MLP backward pass", "ex2": "log-probability and entropy of t
         "ex9": "the expansion step: candidates, equation (1), the run from s_T, join or relabel "
         "(sec 4.2)", "ex10": "the data of self-distillation: BC's buffer, PPO's new and old "
         "tasks (sec 4.3)", "ex11": "equation (1) against its ablations, with a real round-0 "
-        "critic: predict, measure, explain (Table 3)"}
+        "critic: predict, measure, explain (Table 3)", "ex12": "the capstone, nothing new: your "
+        "ex5, ex6, ex9 and ex10 run two rounds of the method; the tasks must grow and zero-shot "
+        "success rise (about a minute)"}
 
 README = """# Task expansion from the inside: the student kit
 
-Eight exercises on the method of "Self-Generating Data for Goal-Conditioned Compositional
+Twelve exercises on the method of "Self-Generating Data for Goal-Conditioned Compositional
 Problems" (Yuan, Li, Wu), in numpy. In each notebook you write one piece of the method; its check
-says PASS, or which case fails, what it expected, what you returned, and a hint.
+says PASS, or which case fails, what it expected, what you returned, and a hint. The last one,
+the capstone, runs two rounds of task expansion with every piece you wrote.
 
 ## Set up, once
 
@@ -278,27 +281,31 @@ says PASS, or which case fails, what it expected, what you returned, and a hint.
 
 | notebook | you write | points |
 |---|---|---|
-""" + "".join(f"| `{NOTEBOOKS[ex]}` | {WHAT[ex]} | {POINTS[ex]} |\n" for ex in NOTEBOOKS) + """
+""" + "".join(f"| `{NOTEBOOKS[ex]}` | {WHAT[ex]} | {POINTS[ex]}"
+             + (f" + {MANUAL[ex]} written, graded by hand" if ex in MANUAL else "") + " |\n"
+             for ex in NOTEBOOKS) + """
 Work in order: exercise 4 uses your exercise 2 (its `ActionDist` runs your
-`ex2_logprob_entropy.ipynb`), and exercise 7 trains a policy with your exercises 1 to 4.
+`ex02_logprob_entropy.ipynb`), exercise 7 trains a policy with your exercises 1 to 4, and
+exercise 12 runs two rounds of the method with your exercises 1 to 6, 8, 9 and 10.
 
 ## Check yourself
 
 Run a notebook's last cell: it prints PASS, or stops with an AssertionError that says what
 failed. Or, in a terminal in this folder:
 
-    python -m course ex3 ex3_gae.ipynb   # one exercise
+    python -m course ex3 ex03_gae.ipynb   # one exercise
     python -m course ex7 .               # exercise 7: trains with your ex1-ex4
-    python -m course all .               # all eight, then your total
+    python -m course ex12 .              # exercise 12: two rounds with your pieces
+    python -m course all .               # every exercise, then your total
 
 ## What is in this folder
 
-- `ex1_mlp_backward.ipynb` ... `ex8_attention_backward.ipynb`: the exercises; hand these in.
+- `ex01_mlp_backward.ipynb` ... `ex12_capstone.ipynb`: the exercises; hand these in.
 - `taskexp.py` (the method), `env2d.py` (the world), `agent.py` (the agent), `taskexp_lib/`
   (what they are built from) and `taskexp_cli/` (the command line): the taskexp library that the
   notebooks import. The functions you write are stubs here (they raise NotImplementedError);
-  where the library needs them, exercise 7
-  runs it on yours.
+  where the library needs them, exercises 7 and 12 run it on yours.
 - `course/`: the checks, a file per exercise. `course/vectors.json`
-  holds their cases, inputs and expected outputs, recorded from the reference solutions.
+  holds their cases, inputs and expected outputs, recorded from the reference solutions, and
+  `course/data/round0.npz` the agent of a default run after round 0 (exercises 11 and 12).
 """

@@ -8,7 +8,7 @@ import os
 import re
 
 from .dist import student_action_dist
-from .problems import FUNCTIONS, NOTEBOOKS
+from .problems import BEHAVIOURAL, FUNCTIONS, NOTEBOOKS
 
 COURSE = os.path.dirname(os.path.abspath(__file__))                      # this package
 REPOSITORY = os.path.dirname(COURSE)
@@ -49,15 +49,25 @@ def _notebook(folder, exercise, needed_by):
 
 
 def functions(exercise, notebook):
-    """The student's functions for an exercise, from their notebook. ex7: from the ex1-ex4
-    notebooks in the folder `notebook` (or the folder of that notebook): [mlp_backward, gae,
-    ppo_loss, ActionDist], the arguments of check_ex7."""
-    if exercise == "ex7":
+    """The student's functions for an exercise, from their notebook. A behavioural exercise (ex7,
+    ex12) takes them from the notebooks of the exercises it needs, in the folder `notebook` (or
+    the folder of that notebook): ex7 [mlp_backward, gae, ppo_loss, ActionDist], ex12 the same
+    with alter, select_goal, relabel, attention_backward, join, expansion_step, distillation_data
+    and distillation_tasks before the ActionDist: the arguments of check_ex7 and check_ex12."""
+    if exercise in BEHAVIOURAL:
         folder = notebook if os.path.isdir(notebook) else os.path.dirname(notebook) or "."
         ns = {}
-        for ex in ("ex1", "ex3", "ex4"):
-            ns.update(load(_notebook(folder, ex, "exercise 7")))
-        return [ns["mlp_backward"], ns["gae"], ns["ppo_loss"], action_dist(folder)]
+        for ex in BEHAVIOURAL[exercise]:
+            if ex != "ex2":                          # ex2 comes in as its ActionDist
+                ns.update(load(_notebook(folder, ex, f"exercise {exercise[2:]}")))
+        names = ["mlp_backward", "gae", "ppo_loss"] + (
+            [] if exercise == "ex7" else ["alter", "select_goal", "relabel", "attention_backward",
+                                          "join", "expansion_step", "distillation_data",
+                                          "distillation_tasks"])
+        missing = [f for f in names if f not in ns]
+        if missing:
+            raise NameError(f"your notebooks define no {', '.join(missing)}")
+        return [ns[f] for f in names] + [action_dist(folder)]
     ns = load(notebook)
     missing = [f for f in FUNCTIONS[exercise] if f not in ns]
     if missing:
@@ -67,7 +77,7 @@ def functions(exercise, notebook):
 
 def action_dist(folder=None):
     """The policy distribution of the student's exercise 2: agent.ActionDist's interface, run on
-    the functions of ex2_logprob_entropy.ipynb in `folder` (default: the folder of the notebook
+    the functions of ex02_logprob_entropy.ipynb in `folder` (default: the folder of the notebook
     being loaded, else the working directory, which in Jupyter is the notebook's)."""
     folder = folder or (_loading[-1] if _loading else os.getcwd())
     return student_action_dist(*functions("ex2", _notebook(folder, "ex2", "ActionDist")),

@@ -4,16 +4,19 @@ writes.
 
     nbgrader generate_assignment taskexp     on the instructor notebooks (source/taskexp/)
     nbgrader autograde taskexp               on two submissions, copies of release/taskexp/:
-        reference   every solution cell pasted from the instructor notebooks: 19/19, ex7 included
-        mixed       ex2 and ex4 solved; ex1, ex3, ex5 and ex8 left as released (blank); ex6 with
-                    select_goal = argmax V(s_T, g) (end2new, equation 1 without its first term);
-                    ex7, which first names ex1 as not done, so it does not train: 5/19, the
-                    points of ex2 and ex4 and nothing else
+        reference   every solution cell pasted from the instructor notebooks: every point that
+                    autograde gives, ex7 and ex12 included; then the instructor grades its two
+                    written answers (ex11) by hand, as nbgrader's formgrader would, and it has
+                    full marks
+        mixed       ex2, ex4, ex9 and ex11 solved; ex1, ex3, ex5, ex8 and ex10 left as released
+                    (blank); ex6 with select_goal = argmax V(s_T, g) (end2new, equation 1 without
+                    its first term); ex7 and ex12, which first name ex1 as not done, so they do
+                    not train: the points of ex2, ex4, ex9 and ex11 and nothing else
 
 nbclient, which tests/test_exercises.py uses, executes notebooks but does not grade: nbgrader
 gives 0 points to a graded cell that writes to stderr, stops a cell after its timeout, and grades
-in the student's folder. About a minute on two cores: 16 kernels, ex7 trains once. (A blank
-release scoring 0/19 is checked without nbgrader too, by tests/test_kit.py.)
+in the student's folder. About two minutes on two cores: 24 kernels, ex7 and ex12 train once. (A
+blank release scoring 0 is checked without nbgrader too, by tests/test_kit.py.)
 """
 import json
 import os
@@ -28,9 +31,11 @@ from nbgrader.api import Gradebook
 import course as exercises
 import course.kit as kit
 
-POINTS = exercises.POINTS
+POINTS, MANUAL = exercises.POINTS, exercises.MANUAL
+EXERCISE = {os.path.splitext(name)[0]: ex for ex, name in exercises.NOTEBOOKS.items()}
 WRONG = ("return int(np.argmax(v_T - v_0))", "return int(np.argmax(v_T))")      # in ex6
-BLANK = ("ex1", "ex3", "ex5", "ex8")                   # left as released by the mixed submission
+BLANK = ("ex1", "ex3", "ex5", "ex8", "ex10")           # left as released by the mixed submission
+SOLVED = ("ex2", "ex4", "ex9", "ex11")                 # the mixed submission's passing exercises
 
 
 def nbgrader_cmd(root, *args):
@@ -63,22 +68,37 @@ def course(tmp_path_factory):
     with Gradebook(f"sqlite:///{root / 'gradebook.db'}") as gb:
         for student in ("reference", "mixed"):
             sub = gb.find_submission("taskexp", student)
-            assert sub.max_score == sum(POINTS.values()) == 19
-            scores[student] = {nb.name[:3]: nb.score for nb in sub.notebooks}
+            assert sub.max_score == sum(POINTS.values()) + sum(MANUAL.values())
+            scores[student] = {EXERCISE[nb.name]: nb.score for nb in sub.notebooks}
+        # the instructor grades the reference's written answers by hand, full marks each
+        graded = {EXERCISE[nb.name]: nb for nb in
+                  gb.find_submission("taskexp", "reference").notebooks}
+        for ex in MANUAL:
+            for grade in graded[ex].grades:
+                if grade.cell.cell_type == "markdown":
+                    grade.manual_score = grade.max_score
+        gb.db.commit()
+        scores["reference, graded by hand"] = {
+            EXERCISE[nb.name]: nb.score
+            for nb in gb.find_submission("taskexp", "reference").notebooks}
     return root, scores
 
 
 def test_reference_solutions_get_full_marks(course):
+    """autograde gives every automatic point and leaves the written answers to the instructor;
+    with those graded, full marks."""
     assert course[1]["reference"] == POINTS
+    assert course[1]["reference, graded by hand"] == {
+        ex: POINTS[ex] + MANUAL.get(ex, 0) for ex in POINTS}
 
 
 def test_blank_exercises_get_nothing(course):
-    left = (*BLANK, "ex7")                             # ex7 needs ex1, which is left blank
+    left = (*BLANK, "ex7", "ex12")                     # they need ex1, which is left blank
     assert {ex: course[1]["mixed"][ex] for ex in left} == {ex: 0 for ex in left}
 
 
 def test_a_wrong_answer_loses_exactly_its_exercise(course):
-    assert course[1]["mixed"] == {ex: POINTS[ex] if ex in ("ex2", "ex4") else 0 for ex in POINTS}
+    assert course[1]["mixed"] == {ex: POINTS[ex] if ex in SOLVED else 0 for ex in POINTS}
 
 
 def graded_outputs(path):
@@ -115,8 +135,8 @@ def test_nbgrader_release_is_the_student_kit(course, tmp_path):
                                 ["cells"]]
             assert ["".join(s) for s in code(root)] == ["".join(s) for s in code(mine)], name
         elif name != os.path.join("course", "vectors.json"):
-            assert open(os.path.join(root, name)).read() == \
-                open(os.path.join(mine, name)).read(), name
+            assert open(os.path.join(root, name), "rb").read() == \
+                open(os.path.join(mine, name), "rb").read(), name
     assert kit.answers_in(root) == []
 
 
