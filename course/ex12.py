@@ -35,11 +35,13 @@ from .ex11 import CHECKPOINT
 from .grader import Report, graded, tiny_env
 from .problems import CAPSTONE_NEEDS, FUNCTIONS, NOTEBOOKS
 
-# the budget: the default's settings, smaller (about 40 s on one core of an AMD EPYC)
+# the budget: the default's settings, smaller (about 45 s on one core of an AMD EPYC)
 CAPSTONE = dict(seed=0, base_tasks=500, expand_episodes=600, candidates=64, ppo_steps=4000,
-                distill_epochs=(4,), eval_episodes=50)
+                distill_epochs=(8,), eval_episodes=100)
+# the bars, set well below what the reference clears on seeds 0-2 (lab/bench/capstone.py):
+# about 1.5 more moves each round, and 41 to 46 points more on "I"
 GROWTH = 0.5           # more moves per demonstration than the round before, at least
-LIFT = 0.10            # zero-shot success above round 0's on one held-out shape, at least
+LIFT = 0.20            # zero-shot success above round 0's on one held-out shape, at least
 LAST = {}              # the figures of the last check, for the notebook's plot
 
 
