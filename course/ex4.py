@@ -22,9 +22,9 @@ NEEDS_EX2 = ". (ActionDist runs your exercise 2: it must pass check_ex2 first)"
 # (name, B, blocks n, n_x, n_y, ratios from 1 - lo to 1 + hi, clip, ent_coef, hint);
 # case i has seed 300 + i
 CASES = [("ratio 1 (the first minibatch: logp_old = logp)", 6, 3, 4, 3, 0, 0, 0.2, 0.0,
-          "at r = 1 both terms are equal: the gradient is r A there "
-          "(take the unclipped term when it is <= the clipped one), "
-          "or PPO's first step does nothing"),
+          "at r = 1 both terms are equal, and there your gradient is not the one of "
+          "min(r A, clip(r) A): every sample of PPO's first minibatch has r = 1, so with "
+          "this gradient its first step does nothing"),
          ("ratios inside the clip range", 8, 3, 5, 3, 0.15, 0.15, 0.2, 0.0, LOSS),
          ("ratios outside the clip range", 10, 4, 3, 4, 0.5, 0.5, 0.2, 0.0,
           "PPO takes the min of the two terms (a pessimistic bound); "
