@@ -462,8 +462,9 @@ def distillation_data(run, demos, cfg):
 def distillation_tasks(run, demos, rng):
     """Sec 4.3: the tasks PPO trains on in a round -> (new, old). new: (s0, goals) of every new
     demonstration, each followed by those of its parts (an other order is the same task); old: as
-    many tasks again, drawn uniformly with replacement from every earlier task (run.all_tasks),
-    so that PPO keeps the skills of earlier rounds while it learns the new tasks."""
+    many tasks again, drawn uniformly with replacement from the earlier tasks (run.all_tasks: the
+    newest cfg.buffer_size of them), so that PPO keeps the skills of earlier rounds while it learns
+    the new tasks. Leaves `run` as it is (self_distill updates it)."""
     # s0 a copy: a view would keep the whole episode's states alive as long as the task
     new = [(t.states[0].copy(), t.goals) for d in demos for t in (d, *d.parts)]
     old = [run.all_tasks[i] for i in rng.integers(len(run.all_tasks), size=len(new))]
@@ -562,7 +563,8 @@ def direct_ppo(agent, evals, cfg, envs, short_envs, rng, pieces, bar=silent):
 class Pieces:
     """The parts of the method that the course's exercises ask a student to write. train() uses
     these; exercise 7 passes the student's mlp_backward, gae and ppo_loss instead, the capstone
-    (exercise 12) their alter, select_goal, relabel, expansion_step and distillation data.
+    (exercise 12) those and their alter, select_goal, relabel, expansion_step, distillation_data
+    and distillation_tasks.
     alter and select_goal are called with the library's extra arguments too (restrict, p_add;
     the mode of the Table 3 ablations), which a student's version from exercises 5 and 6 does
     not take."""

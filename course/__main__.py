@@ -19,9 +19,10 @@ from .problems import BEHAVIOURAL, MANUAL, NOTEBOOKS, POINTS
 from .vectors import in_kit
 
 STUDENT_USAGE = """usage: python -m course COMMAND
-  ex1 .. ex11 NOTEBOOK  check one exercise in your notebook, e.g. ex3 ex03_gae.ipynb
+  ex1 .. ex6, ex8 .. ex11 NOTEBOOK
+                        check one exercise in your notebook, e.g. ex3 ex03_gae.ipynb
   ex7 FOLDER            exercise 7: trains with the ex1-ex4 notebooks in FOLDER (e.g. .)
-  ex12 FOLDER           exercise 12: two rounds with the ex5, ex6, ex9, ex10 notebooks
+  ex12 FOLDER           exercise 12: two rounds with the ex01-ex06, ex08-ex10 notebooks
   all FOLDER            check every notebook in FOLDER, then the total"""
 INSTRUCTOR_USAGE = """
   release OUT           (instructors) write the student kit into OUT

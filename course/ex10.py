@@ -8,6 +8,8 @@ the check asks for its contract rather than the reference's draws: the new tasks
 old ones, each an earlier task, uniform over every earlier task (counted over many draws) and
 drawn from the rng passed in.
 """
+import copy
+
 import numpy as np
 
 import taskexp
@@ -33,6 +35,7 @@ LEARNT = ("every demonstration teaches its steps, then those of its other order 
           "its parts where it has them (observations under each trajectory's own goals)")
 NEW = ("the new tasks: (s0, goals) of each demonstration, then of each of its parts, in order; "
        "an other order is the same task again")
+RUN = "leave `run` as it is: self_distill updates it after both calls"
 OLD = ("as many old tasks as new ones, each drawn uniformly, with replacement, from every earlier "
        "task (run.all_tasks), with the rng passed in: PPO must not forget the earlier rounds")
 
@@ -88,15 +91,54 @@ def data_case(distillation_data, i, name, n, steps, count, size, extras):
                     taskexp.Config(buffer_size=size))
     hint = BUFFER
     if err is None:
-        if not (isinstance(got, tuple) and len(got) == 2):
-            err = f"returned {type(got).__name__}, expected a tuple (obs, actions)"
+        if not (isinstance(got, (tuple, list)) and len(got) == 2):
+            err = f"returned {type(got).__name__}, expected a pair (obs, actions)"
         else:
             err = first(diff("actions", got[1], c["actions"]), diff("obs", got[0], c["obs"]))
             got_n, want_n = len(np.asarray(got[1])), len(c["actions"])
             if err and got_n != want_n and want_n < size:     # nothing cut: steps missing/extra
                 hint = LEARNT if extras else BUFFER
+            elif err and extras and got_n == want_n and \
+                    first_difference(got, c) >= want_n - new_steps(c):     # in the new steps
+                hint = LEARNT
+    if err is None and changes_run(lambda r: distillation_data(
+            r, [as_trajectory(d) for d in c["demos"]], taskexp.Config(buffer_size=size)), run):
+        err, hint = "run.buffer_obs or run.buffer_act changed", RUN
     detail = f"{steps} steps kept, {count} demos, buffer_size {size}"
     return f"distillation_data, {name}", detail, err, hint
+
+
+def changes_run(fn, run):
+    """Does fn(run), called on a copy that is not copied again, change the run's buffer or
+    tasks? (call() hands the student copies, so it cannot see this.)"""
+    mine = copy.deepcopy(run)
+    try:
+        fn(mine)
+    except Exception:
+        return False                      # what it raises, the other cases report
+    same = lambda a, b: (a is None and b is None) or (
+        a is not None and b is not None and len(a) == len(b) and all(
+            np.array_equal(np.asarray(x[0] if isinstance(x, tuple) else x),
+                           np.asarray(y[0] if isinstance(y, tuple) else y))
+            for x, y in zip(a, b)))
+    return not all(same(getattr(mine, f), getattr(run, f))
+                   for f in ("buffer_obs", "buffer_act", "all_tasks", "prev_tasks"))
+
+
+def new_steps(c):
+    """How many of a case's expected BC steps are new (the rest come from the kept buffer)."""
+    return min(len(c["actions"]), sum(len(t["actions"]) for d in c["demos"] for t in (
+        d, *([d["other_order"]] if d["other_order"] else []), *d["parts"])))
+
+
+def first_difference(got, c):
+    """The first row where the student's BC data differ from the reference's."""
+    try:
+        bad = ~np.isclose(np.asarray(got[0], float), c["obs"]).all(axis=(1, 2)) | \
+            (np.asarray(got[1]) != c["actions"]).any(axis=1)
+        return int(np.argmax(bad))
+    except Exception:
+        return 0
 
 
 def make_tasks_case(earlier, count, extras, seed):
@@ -120,8 +162,8 @@ def tasks_of(distillation_tasks, run, demos, seed):
     got, err = call(distillation_tasks, run, demos, np.random.default_rng(seed))
     if err:
         raise ValueError(err)
-    if not (isinstance(got, tuple) and len(got) == 2):
-        raise ValueError(f"returned {type(got).__name__}, expected a tuple (new, old)")
+    if not (isinstance(got, (tuple, list)) and len(got) == 2):
+        raise ValueError(f"returned {type(got).__name__}, expected a pair (new, old)")
     return list(got[0]), list(got[1])
 
 
@@ -145,6 +187,8 @@ def tasks_problem(distillation_tasks, c, seed, earlier_only):
     if not all(map(same_task, old, again)) or (len(earlier_only) > 1 and
                                                all(map(same_task, old, other))):
         return "the old tasks do not follow the rng passed in (same seed, other draws)", OLD
+    if changes_run(lambda r: distillation_tasks(r, demos, np.random.default_rng(seed)), run):
+        return "run.all_tasks or run.prev_tasks changed", RUN
     return None, None
 
 

@@ -30,7 +30,8 @@ from .vectors import case
 
 # (name, n blocks, K candidates, trajectories to collect); case i has seed 900 + i
 CASES = [("three blocks", 3, 4, 6), ("four blocks", 4, 8, 10), ("five blocks", 5, 8, 12),
-         ("six blocks, K = 16", 6, 16, 12), ("one trajectory", 4, 8, 1)]
+         ("six blocks, K = 16", 6, 16, 12), ("one trajectory", 4, 8, 1),
+         ("no successful trajectory", 4, 8, 0)]
 
 START = ("a demonstration of s0 -> g* starts at s0: the successful trajectory first, then the "
          "episode from its sT")
@@ -210,8 +211,8 @@ def expansion_case(expansion_step, i, name, n, K, count):
                               np.random.default_rng(900 + i), pieces)
     got, err = call(step, found, config(n, K), pieces)
     hint, want = RUN, c["demos"]
-    if err is None and not (isinstance(got, tuple) and len(got) == 2):
-        err, hint = f"returned {type(got).__name__}, expected a tuple (demos, reached)", REACHED
+    if err is None and not (isinstance(got, (tuple, list)) and len(got) == 2):
+        err, hint = f"returned {type(got).__name__}, expected a pair (demos, reached)", REACHED
     elif err and "pieces.relabel was given" in err:
         hint = f"{RELABEL}; {ONCE}"
     elif err is None:

@@ -259,7 +259,7 @@ WHAT = {"ex1": "the MLP backward pass", "ex2": "log-probability and entropy of t
         "(sec 4.2)", "ex10": "the data of self-distillation: BC's buffer, PPO's new and old "
         "tasks (sec 4.3)", "ex11": "equation (1) against its ablations, with a real round-0 "
         "critic: predict, measure, explain (Table 3)", "ex12": "the capstone, nothing new: your "
-        "ex5, ex6, ex9 and ex10 run two rounds of the method; the tasks must grow and zero-shot "
+        "ex1-ex6 and ex8-ex10 run two rounds of the method; the tasks must grow and zero-shot "
         "success rise (about a minute)"}
 
 README = """# Task expansion from the inside: the student kit

@@ -104,7 +104,7 @@ def write_notebooks(out_dir, student=True, src_dir=NOTEBOOK_DIR):
             nb = json.load(f)
         for cell in nb["cells"]:
             code = cell["cell_type"] == "code"
-            if student and (code or cell["metadata"]["nbgrader"].get("solution")):
+            if student and (code or cell["metadata"].get("nbgrader", {}).get("solution")):
                 cell["source"] = blank("".join(cell["source"]), text=not code).splitlines(
                     keepends=True)
             if code:

@@ -111,9 +111,10 @@ def relations(x, y, gx, gy, g, at_goal):
 def one_drop_away(state, goals, threshold=THRESHOLD):
     """True when every goal of `goals` not yet met in `state` (its block's centre `threshold` or
     farther from the target) can be met by one drop of its block: no other block overlaps its
-    spot (relations' "blocked") and the spot is supported, by the table or by a block right
-    under it ("supported"). The test of what one more action can meet, by which the course and
-    lab/bench/feasible_goals.py judge the goals that equation (1) and its ablations pick."""
+    spot, and the table or another block right under it holds it up. The test of what one more
+    action can meet, by which the course and lab/bench/feasible_goals.py judge the goals that
+    equation (1) and its ablations pick."""
+    # relations' "blocked" and "supported", for the goals not yet met
     o = observation(state, goals)[None].astype(np.float64)
     x, y, gx, gy, g = (o[..., j] for j in (0, 1, 3, 4, 5))
     at_goal = g * (np.hypot(gx - x, gy - y) < threshold)

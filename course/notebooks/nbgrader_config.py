@@ -29,8 +29,8 @@ c.CourseDirectory.course_id = "taskexp"
 c.CourseDirectory.root = os.path.dirname(os.path.abspath(__file__))
 
 # Exercise 7 trains a policy (12-21 s on one core here) and exercise 12 runs two rounds of the
-# method (about 45 s): minutes on a slow or busy machine. nbgrader's default, 30 s per cell, would
-# stop them and give them 0 points.
+# method (about a minute): minutes on a slow or busy machine. nbgrader's default, 30 s per cell,
+# would stop them and give them 0 points.
 c.Execute.timeout = 600
 
 
