@@ -90,7 +90,7 @@ def main():
               + " -> ".join(f"{x['moves']:.2f}" for x in r["records"]) + "; zero-shot "
               + "; ".join(f"{s} " + " -> ".join(f"{x['eval'][s]:.0%}" for x in r["records"])
                           for s in first["eval"])
-              + f"; best gain {100 * lift:.0f} points (bar {100 * ex12.LIFT:.0f}): "
+              + f"; best gain {100 * lift:.0f} point(s) (bar {100 * ex12.LIFT:.0f}): "
               + ("PASS" if r["problem"] is None else f"FAIL ({r['problem']})"))
     if a.json:
         with open(a.json, "w") as f:
