@@ -397,7 +397,8 @@ def task_expansion(agent, tasks, cfg, envs, short_envs, rng, pieces=None, bar=si
     1. run the policy on the tasks and keep the successful trajectories s0 -> sT;
     2. for each, draw K candidates with one alteration and pick g* by equation (1);
     3. run the policy from sT toward g*: on success the joined trajectory demonstrates s0 -> g*,
-       on failure the joined trajectory is relabelled with the goal it did reach;
+       on failure the joined trajectory is relabelled with the goal it did reach (steps 2 and 3:
+       pieces.expansion_step, by default expansion_step);
     4. not in the paper: the moves of each also in another order that physics allows (orders.py),
        and cfg.goal_parts parts of its goals, each with the moves it needs (hindsight.py).
     """
