@@ -61,5 +61,14 @@ from .ex11 import ablation_table, check_ex11
 from .ex12 import CAPSTONE, capstone_pieces, check_ex12, grow
 from .grader import Report, numerical_grad, passes, tiny_env
 from .notebooks import NOTEBOOK_DIR, action_dist, blank, functions, load, write_notebooks
-from .problems import BEHAVIOURAL, CAPSTONE_NEEDS, EX7_NEEDS, FUNCTIONS, MANUAL, NOTEBOOKS, POINTS
+from .problems import (
+    ARGUMENTS,
+    BEHAVIOURAL,
+    CAPSTONE_NEEDS,
+    EX7_NEEDS,
+    FUNCTIONS,
+    MANUAL,
+    NOTEBOOKS,
+    POINTS,
+)
 from .reference import REFERENCE

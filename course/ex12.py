@@ -117,21 +117,21 @@ def grow(pieces, seed=CAPSTONE["seed"], log=print, **networks):
         tasks, obs, actions = taskexp.base_demos(cfg, envs, rng, CAPSTONE["base_tasks"])
         run = taskexp.RunState(last_round=0, buffer_obs=obs, buffer_act=actions,
                                all_tasks=list(tasks), prev_tasks=tasks)
-        records = [dict(round=0, moves=1.0, goals=float(np.mean([len(g) for _, g in tasks])),
-                        height=float(np.mean([max(y for _, y in g.values()) for _, g in tasks])
-                                     / BLOCK_H - 0.5),
-                        demos=len(tasks), eval=taskexp.evaluate(agent, tests, envs))]
+
+        def figures(k, goals, moves):
+            """Round k's record: its tasks (goal dicts), the moves of their demonstrations."""
+            mean = lambda values: float(np.mean(values)) if goals else 0.0
+            return dict(round=k, moves=mean(moves), goals=mean([len(g) for g in goals]),
+                        height=mean([max(y for _, y in g.values()) / BLOCK_H - 0.5
+                                     for g in goals]),
+                        demos=len(goals), eval=taskexp.evaluate(agent, tests, envs))
+        records = [figures(0, [g for _, g in tasks], [1] * len(tasks))]   # a base task: one move
         for k in (1, 2):
             demos, info = taskexp.task_expansion(agent, run.prev_tasks, cfg, envs, short_envs, rng,
                                                  pieces)
             taskexp.self_distill(agent, run, demos, k, cfg, envs, short_envs, rng, pieces,
                                  log=lambda *a: None)
-            mean = lambda f: float(np.mean([f(d) for d in demos])) if demos else 0.0
-            records.append(dict(round=k, moves=mean(lambda d: len(d.actions)),
-                                goals=mean(lambda d: len(d.goals)),
-                                height=mean(lambda d: max(y for _, y in d.goals.values())
-                                            / BLOCK_H - 0.5),
-                                demos=len(demos), eval=taskexp.evaluate(agent, tests, envs)))
+            records.append(figures(k, [d.goals for d in demos], [len(d.actions) for d in demos]))
             log(f"  round {k}: {len(demos)} demonstrations, {records[-1]['moves']:.2f} moves "
                 f"each; zero-shot " + ", ".join(f"{s} {v:.0%}"
                                                 for s, v in records[-1]["eval"].items())

@@ -145,8 +145,9 @@ def make_case(n, K, count, seed):
     candidates drawn for each, and the reference's demonstrations and `reached`."""
     rng = np.random.default_rng(seed)
     cfg, env = config(n, K), BlockWorld(n, max_steps=6, drop=True)
-    tasks, found = [], []
+    found = []
     while len(found) < count:                # the tasks of 4 trajectories a time, till enough
+        tasks = []
         for _ in range(4):
             env.reset(seed=int(rng.integers(2**31)))
             blocks = rng.permutation(n)[:1 + int(rng.integers(min(n, 3)))]
@@ -155,7 +156,7 @@ def make_case(n, K, count, seed):
             if len({round(x, 3) for x, _ in goals.values()}) < len(goals):   # one spot: one goal
                 goals = dict(list(goals.items())[:1])
             tasks.append((env.get_state(), goals))
-        found += [t for t in run_episodes(Scripted(), tasks[-4:], worlds(n, 6, 4)) if t.success]
+        found += [t for t in run_episodes(Scripted(), tasks, worlds(n, 6, 4)) if t.success]
         found = list({goals_key(t.goals): t for t in found}.values())[:count]  # goals differ
     drawn = [(t.goals, [taskexp.alter(t.goals, env, rng) for _ in range(K)]) for t in found]
     seen = []

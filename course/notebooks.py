@@ -8,7 +8,7 @@ import os
 import re
 
 from .dist import student_action_dist
-from .problems import BEHAVIOURAL, FUNCTIONS, NOTEBOOKS
+from .problems import ARGUMENTS, BEHAVIOURAL, FUNCTIONS, NOTEBOOKS
 
 COURSE = os.path.dirname(os.path.abspath(__file__))                      # this package
 REPOSITORY = os.path.dirname(COURSE)
@@ -51,23 +51,18 @@ def _notebook(folder, exercise, needed_by):
 def functions(exercise, notebook):
     """The student's functions for an exercise, from their notebook. A behavioural exercise (ex7,
     ex12) takes them from the notebooks of the exercises it needs, in the folder `notebook` (or
-    the folder of that notebook): ex7 [mlp_backward, gae, ppo_loss, ActionDist], ex12 the same
-    with alter, select_goal, relabel, attention_backward, join, expansion_step, distillation_data
-    and distillation_tasks before the ActionDist: the arguments of check_ex7 and check_ex12."""
+    the folder of that notebook): the functions ARGUMENTS names, then the ActionDist of the
+    student's exercise 2, the arguments of check_ex7 and check_ex12."""
     if exercise in BEHAVIOURAL:
         folder = notebook if os.path.isdir(notebook) else os.path.dirname(notebook) or "."
         ns = {}
         for ex in BEHAVIOURAL[exercise]:
             if ex != "ex2":                          # ex2 comes in as its ActionDist
                 ns.update(load(_notebook(folder, ex, f"exercise {exercise[2:]}")))
-        names = ["mlp_backward", "gae", "ppo_loss"] + (
-            [] if exercise == "ex7" else ["alter", "select_goal", "relabel", "attention_backward",
-                                          "join", "expansion_step", "distillation_data",
-                                          "distillation_tasks"])
-        missing = [f for f in names if f not in ns]
+        missing = [f for f in ARGUMENTS[exercise] if f not in ns]
         if missing:
             raise NameError(f"your notebooks define no {', '.join(missing)}")
-        return [ns[f] for f in names] + [action_dist(folder)]
+        return [ns[f] for f in ARGUMENTS[exercise]] + [action_dist(folder)]
     ns = load(notebook)
     missing = [f for f in FUNCTIONS[exercise] if f not in ns]
     if missing:

@@ -30,3 +30,8 @@ EX7_NEEDS = ("ex1", "ex2", "ex3", "ex4")
 CAPSTONE_NEEDS = ("ex1", "ex2", "ex3", "ex4", "ex5", "ex6", "ex8", "ex9", "ex10")
 # the exercises that take a folder (the notebooks of the exercises they need), not a notebook
 BEHAVIOURAL = {"ex7": EX7_NEEDS, "ex12": CAPSTONE_NEEDS}
+# the functions their checks take from those notebooks, in order; then the ActionDist of ex2
+ARGUMENTS = {"ex7": ["mlp_backward", "gae", "ppo_loss"],
+             "ex12": ["mlp_backward", "gae", "ppo_loss", "alter", "select_goal", "relabel",
+                      "attention_backward", "join", "expansion_step", "distillation_data",
+                      "distillation_tasks"]}

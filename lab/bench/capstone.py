@@ -46,8 +46,7 @@ def new_only(run, demos, rng):
 WRONG = {"no-prefix": ("expansion_step", no_prefix), "new-only": ("distillation_tasks", new_only)}
 
 
-NAMES = ["mlp_backward", "gae", "ppo_loss", "alter", "select_goal", "relabel",
-         "attention_backward", "join", "expansion_step", "distillation_data", "distillation_tasks"]
+NAMES = course.ARGUMENTS["ex12"]          # check_ex12's arguments, before the ActionDist
 
 
 def arguments(which, wrong=None):
