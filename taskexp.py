@@ -153,20 +153,36 @@ def base_demos(cfg, envs, rng, count, bar=silent):
     return tasks, np.stack(obs), np.stack(actions)
 
 
+def onto_cleared_spot(env, rng, first):
+    """The second move of a clearing pair: a block other than `first` (the (block, action, s0,
+    s1) of the move before) dropped where `first`'s block stood, on the table now that it is
+    gone."""
+    b, _, s0, _ = first
+    other = int(rng.choice([i for i in range(env.n_blocks) if i != b]))
+    return other, env.encode_action(other, s0[b, 0], env.y_bins[0])
+
+
 def base_pairs(cfg, envs, rng, count, bar=silent):
     """Not in the paper: `count` two-move demonstrations, whose parts (hindsight.add_parts) show a
     block that no goal names move: in a scattered scene two different random blocks move one
     after the other (random_move, usable_moves), and the goals are where both came to rest. A
     part that names the second block alone needs the first move where it cleared or built the
-    second one's spot. Returns Trajectories."""
+    second one's spot. In a share cfg.clear_pairs of the scenes the second block goes where the
+    first one stood (onto_cleared_spot): random second moves rarely land on a spot just cleared,
+    so without them the parts show a support built far more often than a site cleared.
+    Returns Trajectories."""
     pairs = []
     with bar(total=count, desc="pairs") as progress:
         while len(pairs) < count:
             for env in envs:
                 env.reset(seed=int(rng.integers(2**31)))
             runs = {k: [] for k in range(len(envs))}           # each world's usable moves
+            # drawn only when asked for, so that the pairs of clear_pairs = 0 stay as they were
+            clearing = [bool(cfg.clear_pairs) and rng.random() < cfg.clear_pairs for _ in envs]
             for step in (1, 2):
-                moves = [(k, random_move(envs[k], rng, cfg.free_table)) for k in runs]
+                clears = lambda k: step == 2 and clearing[k]     # a clearing pair's second move
+                moves = [(k, onto_cleared_spot(envs[k], rng, runs[k][0]) if clears(k)
+                          else random_move(envs[k], rng, cfg.free_table)) for k in runs]
                 for k, b, a, s0, s1 in usable_moves(envs, moves):
                     if b not in [m[0] for m in runs[k]]:        # not the block moved before
                         runs[k].append((b, a, s0, s1))
@@ -488,7 +504,9 @@ def self_distill(agent, run, demos, k, cfg, envs, short_envs, rng, pieces, bar=s
     bc_loss = agent.bc(run.buffer_obs, run.buffer_act, epochs, cfg.bc_batch, cfg.bc_lr, rng,
                        bar=bar)
     log(f"  BC on {len(run.buffer_act)} steps: loss {bc_loss[0]:.3f} -> {bc_loss[-1]:.3f}")
-    new_tasks, old = pieces.distillation_tasks(run, demos, rng)
+    # parts_in "bc": PPO, and the next round's expansion, meet whole demonstrations' tasks only
+    whole = demos if cfg.parts_in == "all" else [replace(d, parts=[]) for d in demos]
+    new_tasks, old = pieces.distillation_tasks(run, whole, rng)
     ppo_log = ppo_phase(agent, new_tasks + old, cfg, envs, short_envs, rng, "PPO distil",
                         pieces=pieces, bar=bar)
     run.all_tasks = (run.all_tasks + new_tasks)[-cfg.buffer_size:]

@@ -43,11 +43,12 @@ from . import report
 CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",),
            "shapes": tuple(SHAPES), "families": tuple(FAMILIES),
            "dtype": ("float32", "float64"),
-           "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place")}
+           "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place"),
+           "parts_in": ("all", "bc")}
 MIN_ZERO = {"seed", "rounds", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add",
-            "goal_parts", "base_pairs",
+            "goal_parts", "base_pairs", "clear_pairs",
             "label_tasks", "label_top", "label_pair"}
-AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add"}
+AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add", "clear_pairs"}
 SCALED = ("base_demos", "base_pairs", "ppo_steps", "expand_episodes", "eval_episodes",
           "ppo_episodes", "label_tasks")
 RUN_FILES = ("results.json", "state.npz", "round*.npz")      # what a run leaves in its directory

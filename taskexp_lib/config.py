@@ -55,6 +55,9 @@ class Config:
     """sec 4.1, not in the paper: two-move random demonstrations whose parts (one block's goal
     each; taskexp_lib/hindsight.py) that move a block no goal names join the base demos: a block
     moved away from where the other came to rest, or put under it; 0 = off"""
+    clear_pairs: float = 0.0
+    """base_pairs: the share of the pairs whose second block goes where the first one stood, so
+    that its part shows a site cleared (random pairs mostly show a support built)"""
     max_stay: int = 2
     """sec 4.1: up to this many "stay where you are" goals for other blocks in a base task"""
     bc_epochs: int = 8
@@ -117,6 +120,9 @@ class Config:
     and PPO also learn, each with the moves it needs (replayed without the others), where a block
     that no goal of the part names moves: a support, or a block moved out of the way
     (taskexp_lib/hindsight.py); 0 = off"""
+    parts_in: str = "all"
+    """goal_parts: all (BC and PPO learn the parts, and the next round extends them) | bc (BC
+    alone learns them: PPO's tasks and the next round's come from whole demonstrations)"""
 
     label_tasks: int = 2000
     """not in the paper: labelled outcomes as data for V(s, g) (taskexp_lib/labels.py), on this
@@ -172,6 +178,7 @@ class SameAs(str):
 # did: a run saved without the field resumes with that value
 ADDED = {"other_orders": False,                                # 2026-12-04
          "goal_parts": 0, "base_pairs": 0,                       # 2026-12-06
+         "clear_pairs": 0.0, "parts_in": "all",                  # 2026-12-07
          "distill_epochs": SameAs("bc_epochs"),                  # 2026-12-07
          # evaluation only: a run made before learns the same, and is tried on them from its
          # next round on

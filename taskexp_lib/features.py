@@ -89,7 +89,10 @@ def relations(x, y, gx, gy, g, at_goal):
       wait        another unreached goal lies under mine: that block must go first
       first       my goal lies under another block's goal: I am its support
       covered     a block rests on me now
-      needs_support  has goal, not reached, not supported: a free block must go under it, and
+      held        my goal is on the table, or blocks now under my goal spot hold a block up
+                  there: one under its centre ("supported"), or one under each of its halves
+                  (the stem of "Y" on its two legs, which "supported" misses)
+      needs_support  has goal, not reached, not held: a free block must go under it, and
                   the RBF code of its goal x (pooled) tells the free blocks where
     """
     w, h = BLOCK_W, BLOCK_H
@@ -104,7 +107,12 @@ def relations(x, y, gx, gy, g, at_goal):
         wait=g * any_j(pending[:, None, :] * (near(gx, gx, w) & near(gy, gy - h, h / 2))),
         first=g * any_j(g[:, None, :] * (near(gx, gx, w) & near(gy - h, gy, h / 2))),
         covered=any_j(near(x, x, w) & near(y - h, y, h / 2)))
-    out["needs_support"] = pending * (1.0 - out["supported"])
+    # (B, i, j): block j lies right under i's goal spot, left (dx < 0) or right of its centre
+    under = near(x, gx, w) & near(y, gy - h, h / 2)
+    dx = x[:, None, :] - gx[:, :, None]
+    both_halves = any_j(under & (dx < 0)) * any_j(under & (dx > 0))
+    out["held"] = np.maximum(out["supported"], g * both_halves)
+    out["needs_support"] = pending * (1.0 - out["held"])
     return out
 
 
@@ -120,4 +128,6 @@ def one_drop_away(state, goals, threshold=THRESHOLD):
     at_goal = g * (np.hypot(gx - x, gy - y) < threshold)
     facts = relations(x, y, gx, gy, g, at_goal)
     pending = g * (1.0 - at_goal)                   # a goal met already needs no drop
-    return bool((facts["needs_support"] + pending * facts["blocked"]).max() == 0)
+    # held up by a block right under it ("supported"), as this test has always been written
+    unsupported = pending * (1.0 - facts["supported"])
+    return bool((unsupported + pending * facts["blocked"]).max() == 0)

@@ -74,15 +74,20 @@ class AttentionNet:
         grads = mlp.backward(dout.reshape(B * n, -1))
         return grads, mlp.dx.reshape(B, n, -1)
 
-    def forward(self, f):
-        """f (B, n, F) -> o (B, n, out)."""
+    def encode(self, f):
+        """f (B, n, F) -> the tokens LN_f(x) (B, n, H) that the head reads: what each block knows
+        of the others after the attention layers (lab/bench/probe.py asks what that is)."""
         m = self.modules
         x = self._tokens(m["embed"], np.asarray(f, dtype=self.dtype))
         for k in range(self.layers):
             b = f"block{k}."
             x = x + m[b + "attn"].forward(m[b + "ln1"].forward(x))
             x = x + self._tokens(m[b + "ffn"], m[b + "ln2"].forward(x))
-        return self._tokens(m["head"], m["ln_f"].forward(x))
+        return m["ln_f"].forward(x)
+
+    def forward(self, f):
+        """f (B, n, F) -> o (B, n, out)."""
+        return self._tokens(self.modules["head"], self.encode(f))
 
     def backward(self, dout):
         """dout (B, n, out) -> grads {"embed.W0": ..., "head.b1": ...}; sets self.dx (B, n, F)."""

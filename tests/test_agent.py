@@ -293,7 +293,20 @@ def test_relations():
     r = relation_table(x, y, gx, gy, g)
     # 2 covered; 1's goal supported by 2
     assert r["covered"] == [0, 0, 1] and r["supported"][1] == 1
-    assert set(r) == set(RELATIONS) | {"needs_support"}
+    assert set(r) == set(RELATIONS) | {"held", "needs_support"}
+
+
+def test_a_goal_on_two_legs_is_held_up():
+    """The stem of "Y": its goal over blocks 0.75 block widths to either side is held up once
+    both stand, though no block lies under its centre; one leg alone does not hold it."""
+    w = 0.1
+    x, y = [-0.75 * w, 0.75 * w, 0.3], [0.025, 0.025, 0.025]
+    gx, gy, g = [-0.75 * w, 0.75 * w, 0.0], [0.025, 0.025, 0.075], [1.0, 1.0, 1.0]
+    r = relation_table(x, y, gx, gy, g)
+    assert r["supported"][2] == 0 and r["held"][2] == 1 and r["needs_support"][2] == 0
+    x[1] = -0.3                                               # the right leg elsewhere
+    r = relation_table(x, y, gx, gy, g)
+    assert r["held"][2] == 0 and r["needs_support"][2] == 1
 
 
 def test_act_value_sample_shapes_and_errors():

@@ -294,3 +294,19 @@ def test_a_branch_of_round_0_gives_the_bytes_of_a_run_made_with_its_settings(tmp
     branch.branch(str(tmp_path / "base"), str(tmp_path / "end2new"), {"select": "end2new"}, True)
     with pytest.raises(SystemExit, match="branch a run made with --rounds 0"):
         branch.branch(str(tmp_path / "direct"), str(tmp_path / "other"), later)
+
+
+def test_levers_averages_each_figure_over_the_runs(tmp_path):
+    """lab/bench/levers.py: the mean over the shapes, each family's mean over its tasks and the
+    other worlds, per run, and per task over the runs; only the rounds every run has."""
+    import levers
+    record = lambda k, a: dict(round=k, eval={"I": a, "Y": 0.0}, families={"air": {"1 up": a}},
+                               blocks={"7": {"I": 1.0}})
+    for name, a in (("one", 0.2), ("two", 0.6)):
+        rounds = [record(k, a) for k in range(2 if name == "one" else 3)]
+        (tmp_path / f"{name}.json").write_text(json.dumps({"rounds": rounds}))
+    rows = levers.summary(levers.load(str(tmp_path / "*.json")))
+    assert [k for k, *_ in rows] == [0, 1]
+    _, means, tasks = rows[1]
+    assert np.allclose(means["I/Y/3T"], [0.1, 0.3]) and np.allclose(means["air"], [0.2, 0.6])
+    assert tasks["I/Y/3T"] == {"I": 0.4, "Y": 0.0} and means["7 blocks"] == [1.0, 1.0]

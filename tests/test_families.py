@@ -139,6 +139,50 @@ def test_add_parts_keeps_the_parts_that_move_a_block_no_goal_names(world):
             assert set(p.goals) not in ({0}, {0, 1})       # the bottom needs no other block
 
 
+def test_clearing_pairs_drop_the_second_block_where_the_first_stood():
+    """--clear-pairs: the second move of such a pair drops another block on the first one's old
+    spot, so the part that names the second block alone needs the first moved away."""
+    import taskexp
+    worlds = [BlockWorld(6, drop=True) for _ in range(2)]
+    cfg = Config(clear_pairs=1.0)
+    pairs = taskexp.base_pairs(cfg, worlds, np.random.default_rng(0), 24)
+    for p in pairs:
+        (b1, x1, _), (b2, x2, _) = p.actions
+        assert b1 != b2 and x2 == np.abs(worlds[0].x_bins - p.states[0][b1, 0]).argmin()
+    hindsight.add_parts(pairs, worlds, np.random.default_rng(0), 4)
+    # the parts that name the second block alone (a random second move needs the first 4 in 9)
+    second = [q for p in pairs for q in p.parts if list(q.goals) == [int(p.actions[1][0])]]
+    assert len(second) >= 20 and all(len(q.actions) == 2 for q in second)
+    # on the table where the first stood, unless the first moved too little and now carries it
+    assert sum(layer(q.goals[int(q.actions[1][0])][1]) == 0 for q in second) >= 18
+
+
+def test_the_probe_pairs_differ_in_one_goal_and_its_control_scores_half():
+    """lab/bench/probe.py: each minimal pair keeps block i's own features and drops the goal of
+    the block right below its goal; a probe on those features cannot beat chance."""
+    import os
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "lab", "bench"))
+    import probe
+
+    from agent import Agent
+    tasks = shapes.eval_tasks(Config(eval_episodes=6), BlockWorld(6, drop=True))["I"]
+    pairs = probe.minimal_pairs(tasks)
+    assert len(pairs) == 6 * 3               # a tower of four: the top three wait for the one below
+    agent = Agent(6, n_x=37, n_y=1, hidden=16, seed=0)
+    for _, i, with_j, without in pairs:
+        assert (with_j[:, 5] - without[:, 5]).sum() == 1 and with_j[i, 5] == without[i, 5] == 1
+        f = agent.features(np.stack([with_j, without]))
+        assert np.array_equal(f[0, i], f[1, i])
+    X, y = np.random.default_rng(0).normal(size=(40, 3)), np.r_[np.ones(20), -np.ones(20)]
+    same = np.repeat(np.ones((20, 3)), 2, axis=0)
+    assert probe.probe_accuracy(np.vstack([same[::2], same[1::2]]), y, np.arange(40) % 2 == 0) \
+        == 0.5
+    X[:, 0] += 3 * y                                                  # a column that tells them
+    assert probe.probe_accuracy(X, y, np.arange(40) % 2 == 0) == 1.0
+
+
 def test_the_indicator_counts_the_moves_of_blocks_no_goal_names(tmp_path):
     """lab/bench/unnamed_blocks.py on an untrained checkpoint: every task measured, shares in
     0..1, and the first-move share is what the episodes' first actions say."""

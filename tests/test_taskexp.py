@@ -11,6 +11,7 @@ import taskexp_cli as cli
 from agent import Agent
 from env2d import BlockWorld
 from taskexp_lib import labels, shapes
+from taskexp_lib.checkpoint import load_npz
 from taskexp_lib.geometry import BLOCK_H, is_success, layer, same_spot
 from taskexp_lib.rollout import Trajectory
 
@@ -286,3 +287,11 @@ def test_cli_hindsight_on_goals_teaches_moves_of_blocks_no_goal_names(tmp_path):
     _, default = run_cli(tmp_path / "default")
     assert default["rounds"][1]["expansion"]["parts"] == 0
     assert default["rounds"][1]["unnamed_moves"] < res["rounds"][1]["unnamed_moves"]
+    # --parts-in bc: BC learns the parts, PPO and the next round's expansion only whole demos
+    bc, res_bc = run_cli(tmp_path / "bc", *flags, "--parts-in", "bc")
+    info, info_bc = res["rounds"][1]["expansion"], res_bc["rounds"][1]["expansion"]
+    assert info_bc == info                           # the same expansion: round 0 is the same
+    demos = info["joined"] + info["relabelled"]
+    prev = lambda run: len(load_npz(os.path.join(run, "state.npz"))["prev_tasks.goals"])
+    assert prev(out) == demos + info["parts"] and prev(bc) == demos
+    assert res_bc["rounds"][1]["unnamed_moves"] == res["rounds"][1]["unnamed_moves"]

@@ -28,7 +28,7 @@ from taskexp_lib.config import saved_config  # noqa: E402
 # the settings that only rounds >= 1 read (round 0's labels and stretch tasks read p_add,
 # candidates, restrict and select, so those are not among them), and what is evaluated beside
 # the shapes (the families, the worlds of other block counts)
-LATER = ("rounds", "expand_episodes", "other_orders", "goal_parts", "distill_epochs",
+LATER = ("rounds", "expand_episodes", "other_orders", "goal_parts", "parts_in", "distill_epochs",
          "buffer_size", "baseline", "families", "eval_blocks")
 # Table 3's rules, which an ablation (--ablation) applies from round 1 on: all rows then share
 # one base policy and round-0 critic, so that the table compares goal selection alone. Such a
