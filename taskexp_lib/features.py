@@ -101,15 +101,16 @@ def relations(x, y, gx, gy, g, at_goal):
     near = lambda a, b, tol: (np.abs(a[:, None, :] - b[:, :, None]) < tol)
     any_j = lambda m: (m * other).max(-1)
     pending = g * (1.0 - at_goal)                                      # goals not reached yet
+    # (B, i, j): block j is in the layer under i's goal spot (below), its centre dx to the right
+    # of the spot's; under: below and overlapping the spot, so that it carries part of it
+    below, dx = near(y, gy - h, h / 2), x[:, None, :] - gx[:, :, None]
+    under = below & (np.abs(dx) < w)
     out = dict(
         blocked=g * any_j(near(x, gx, w * 0.95) & near(y, gy, h * 0.95)),
-        supported=g * np.maximum(gy < h, any_j(near(x, gx, w / 2) & near(y, gy - h, h / 2))),
+        supported=g * np.maximum(gy < h, any_j(below & (np.abs(dx) < w / 2))),
         wait=g * any_j(pending[:, None, :] * (near(gx, gx, w) & near(gy, gy - h, h / 2))),
         first=g * any_j(g[:, None, :] * (near(gx, gx, w) & near(gy - h, gy, h / 2))),
         covered=any_j(near(x, x, w) & near(y - h, y, h / 2)))
-    # (B, i, j): block j lies right under i's goal spot, left (dx < 0) or right of its centre
-    under = near(x, gx, w) & near(y, gy - h, h / 2)
-    dx = x[:, None, :] - gx[:, :, None]
     both_halves = any_j(under & (dx < 0)) * any_j(under & (dx > 0))
     out["held"] = np.maximum(out["supported"], g * both_halves)
     out["needs_support"] = pending * (1.0 - out["held"])

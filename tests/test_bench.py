@@ -310,3 +310,26 @@ def test_levers_averages_each_figure_over_the_runs(tmp_path):
     _, means, tasks = rows[1]
     assert np.allclose(means["I/Y/3T"], [0.1, 0.3]) and np.allclose(means["air"], [0.2, 0.6])
     assert tasks["I/Y/3T"] == {"I": 0.4, "Y": 0.0} and means["7 blocks"] == [1.0, 1.0]
+
+
+def test_the_probe_pairs_differ_in_one_goal_and_its_control_scores_half():
+    """lab/bench/probe.py: each minimal pair keeps block i's own features and drops the goal of
+    the block right below its goal; a probe on those features cannot beat chance."""
+    import probe
+
+    from agent import Agent
+    from env2d import BlockWorld
+    from taskexp_lib import shapes
+    tasks = shapes.eval_tasks(Config(eval_episodes=6), BlockWorld(6, drop=True))["I"]
+    pairs = probe.minimal_pairs(tasks)
+    assert len(pairs) == 6 * 3               # a tower of four: the top three wait for the one below
+    agent = Agent(6, n_x=37, n_y=1, hidden=16, seed=0)
+    for _, i, with_j, without in pairs:
+        assert (with_j[:, 5] - without[:, 5]).sum() == 1 and with_j[i, 5] == without[i, 5] == 1
+        f = agent.features(np.stack([with_j, without]))
+        assert np.array_equal(f[0, i], f[1, i])
+    X, y = np.random.default_rng(0).normal(size=(40, 3)), np.r_[np.ones(20), -np.ones(20)]
+    train = np.arange(40) % 2 == 0
+    assert probe.probe_accuracy(np.ones((40, 3)), y, train) == 0.5     # rows alike: one guess
+    X[:, 0] += 3 * y                                                  # a column that tells them
+    assert probe.probe_accuracy(X, y, train) == 1.0

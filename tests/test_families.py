@@ -157,31 +157,6 @@ def test_clearing_pairs_drop_the_second_block_where_the_first_stood():
     assert sum(layer(q.goals[int(q.actions[1][0])][1]) == 0 for q in second) >= 18
 
 
-def test_the_probe_pairs_differ_in_one_goal_and_its_control_scores_half():
-    """lab/bench/probe.py: each minimal pair keeps block i's own features and drops the goal of
-    the block right below its goal; a probe on those features cannot beat chance."""
-    import os
-    import sys
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                    "lab", "bench"))
-    import probe
-
-    from agent import Agent
-    tasks = shapes.eval_tasks(Config(eval_episodes=6), BlockWorld(6, drop=True))["I"]
-    pairs = probe.minimal_pairs(tasks)
-    assert len(pairs) == 6 * 3               # a tower of four: the top three wait for the one below
-    agent = Agent(6, n_x=37, n_y=1, hidden=16, seed=0)
-    for _, i, with_j, without in pairs:
-        assert (with_j[:, 5] - without[:, 5]).sum() == 1 and with_j[i, 5] == without[i, 5] == 1
-        f = agent.features(np.stack([with_j, without]))
-        assert np.array_equal(f[0, i], f[1, i])
-    X, y = np.random.default_rng(0).normal(size=(40, 3)), np.r_[np.ones(20), -np.ones(20)]
-    train = np.arange(40) % 2 == 0
-    assert probe.probe_accuracy(np.ones((40, 3)), y, train) == 0.5     # rows alike: one guess
-    X[:, 0] += 3 * y                                                  # a column that tells them
-    assert probe.probe_accuracy(X, y, train) == 1.0
-
-
 def test_the_indicator_counts_the_moves_of_blocks_no_goal_names(tmp_path):
     """lab/bench/unnamed_blocks.py on an untrained checkpoint: every task measured, shares in
     0..1, and the first-move share is what the episodes' first actions say."""

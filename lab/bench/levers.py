@@ -12,8 +12,12 @@ import argparse
 import glob
 import json
 import os
+import sys
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from run_seeds import pm  # noqa: E402
 
 
 def load(paths):
@@ -48,7 +52,6 @@ def main():
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("levers", nargs="+", metavar="NAME=RUNS")
     a = p.parse_args()
-    pm = lambda v: f"{100 * np.mean(v):.0f} +- {100 * np.std(v):.0f}%"
     for lever in a.levers:
         name, sep, paths = lever.partition("=")
         if not sep:
@@ -56,7 +59,8 @@ def main():
         runs = load(paths)
         print(f"## {name} ({len(runs)} runs)")
         for k, means, tasks in summary(runs):
-            print(f"round {k}: " + " | ".join(f"{n} {pm(v)}" for n, v in means.items()))
+            print(f"round {k}: " + " | ".join(f"{n} {pm(100 * np.asarray(v), '%')}"
+                                        for n, v in means.items()))
             print("    " + "; ".join(f"{n}: " + ", ".join(f"{t} {100 * v:.0f}"
                                                          for t, v in per.items())
                                    for n, per in tasks.items()))

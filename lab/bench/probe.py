@@ -32,28 +32,26 @@ import taskexp  # noqa: E402
 from agent import Agent  # noqa: E402
 from env2d import run_worlds  # noqa: E402
 from taskexp_lib import one_blas_thread  # noqa: E402
-from taskexp_lib.features import relations  # noqa: E402
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, THRESHOLD, observation  # noqa: E402
 from taskexp_lib.shapes import eval_tasks  # noqa: E402
 
 
 def minimal_pairs(tasks):
     """[(scene index, block i, obs with j's goal, obs without it)] for the tasks [(s0, goals)]:
-    every goal block i whose pending goal has another pending goal j right below it."""
+    every goal block i and pending goal j right below i's goal (what makes i "wait" in
+    features.relations, one j at a time)."""
     pairs = []
     for scene, (s0, goals) in enumerate(tasks):
-        o = observation(s0, goals)[None].astype(np.float64)
-        x, y, gx, gy, g = (o[..., c] for c in (0, 1, 3, 4, 5))
-        at_goal = g * (np.hypot(gx - x, gy - y) < THRESHOLD)
-        waits = relations(x, y, gx, gy, g, at_goal)["wait"][0]
-        for i in np.flatnonzero(waits):
-            # the pending goals j that make i wait (relations' "wait", one j at a time)
-            below = [j for j in goals if j != i and not at_goal[0, j]
-                     and abs(goals[j][0] - goals[i][0]) < BLOCK_W
-                     and abs(goals[j][1] - (goals[i][1] - BLOCK_H)) < BLOCK_H / 2]
-            for j in below:
-                without = {b: p for b, p in goals.items() if b != j}
-                pairs.append((scene, int(i), observation(s0, goals), observation(s0, without)))
+        whole = observation(s0, goals)
+        pending = [j for j, (gx, gy) in goals.items()
+                   if np.hypot(gx - s0[j, 0], gy - s0[j, 1]) >= THRESHOLD]
+        for i in sorted(goals):
+            gx, gy = goals[i]
+            for j in pending:
+                if j != i and abs(goals[j][0] - gx) < BLOCK_W \
+                        and abs(goals[j][1] - (gy - BLOCK_H)) < BLOCK_H / 2:
+                    without = {b: p for b, p in goals.items() if b != j}
+                    pairs.append((scene, int(i), whole, observation(s0, without)))
     return pairs
 
 
