@@ -31,6 +31,10 @@ from taskexp_lib.nets import NETWORKS
 from taskexp_lib.nn import Adam, check_finite, clip_grad_norm, mlp_backward
 from taskexp_lib.shards import DataParallel
 
+# Config.greedy: the rules of the deterministic action, ActionDist.mode ("joint") and
+# ActionDist.block_mode ("block")
+GREEDY = ("joint", "block")
+
 
 class OtherWorldWarning(UserWarning):
     """An agent acts in a world of another number of blocks than it learnt in (Agent.features)."""
@@ -86,6 +90,15 @@ class ActionDist:
         """-> the most likely joint action (B, 3): argmax_b [log pi(b) + max_x .. + max_y ..]."""
         i = np.arange(self.shape[0])
         b = (self.lb + self.lx.max(-1) + self.ly.max(-1)).argmax(-1)
+        return np.stack([b, self.lx[i, b].argmax(-1), self.ly[i, b].argmax(-1)], -1)
+
+    def block_mode(self):
+        """-> the most likely block, then its most likely x-bin and layer (B, 3): each head's
+        argmax in the order the policy samples, as the authors' greedy action takes it. Unlike
+        mode(), a block whose destination is spread (a block to clear away: many x are right)
+        is not passed over for one whose destination is certain."""
+        i = np.arange(self.shape[0])
+        b = self.lb.argmax(-1)
         return np.stack([b, self.lx[i, b].argmax(-1), self.ly[i, b].argmax(-1)], -1)
 
     def backward(self, actions, a, c):
@@ -220,9 +233,13 @@ class Agent:
 
     def __init__(self, n_blocks=Config.n_blocks, n_x=N_X, n_y=1, hidden=Config.hidden,
                  seed=Config.seed, mlp_backward=mlp_backward, dtype=Config.dtype,
-                 action_dist=None, network=Config.network, features=Config.features):
+                 action_dist=None, network=Config.network, features=Config.features,
+                 greedy=Config.greedy):
         self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
         self.n_y = int(n_y)
+        if greedy not in GREEDY:
+            raise ValueError(f"greedy {greedy!r}: one of {GREEDY}")
+        self.greedy = greedy        # the deterministic action's rule (Config.greedy); not saved
         self.dtype, self.action_dist = np.dtype(dtype), action_dist or ActionDist
         if self.dtype not in (np.float32, np.float64):
             raise ValueError(f"dtype {dtype!r}: the networks compute in float32 or float64")
@@ -278,10 +295,14 @@ class Agent:
 
     def act(self, obs, deterministic=False, rng=None):
         """obs (n, 6) -> action (3,) int64, or (B, n, 6) -> (B, 3).  Samples with rng (default:
-        the agent's own seeded Generator), or takes the joint mode when deterministic."""
+        the agent's own seeded Generator), or when deterministic takes the greedy action by the
+        rule self.greedy: the joint mode, or the block's mode and then its x's (block_mode)."""
         obs, single = self._batched(obs)
         dist = self.policy(self.features(obs))
-        a = dist.mode() if deterministic else dist.sample(self.rng if rng is None else rng)
+        if not deterministic:
+            a = dist.sample(self.rng if rng is None else rng)
+        else:
+            a = dist.block_mode() if self.greedy == "block" else dist.mode()
         return a[0] if single else a
 
     def value(self, obs):

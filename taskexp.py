@@ -519,7 +519,8 @@ def self_distill(agent, run, demos, k, cfg, envs, short_envs, rng, pieces, bar=s
 # --------------------------------------------------------------------------------------------
 
 def evaluate(agent, tasks_by_shape, envs, bar=silent, desc="zero-shot"):
-    """Zero-shot success per shape with the greedy policy: {shape: rate}."""
+    """Zero-shot success per shape with the greedy policy (the agent's rule, Config.greedy):
+    {shape: rate}."""
     with bar(total=sum(map(len, tasks_by_shape.values())), desc=desc) as progress:
         return {name: success_rate(run_episodes(agent, tasks, envs, deterministic=True,
                                                 progress=progress))
@@ -599,10 +600,11 @@ class Pieces:
 
 
 def make_agent(cfg, mlp_backward=mlp_backward):
-    """The untrained agent of a run with settings cfg (its network, features and action heads)."""
+    """The untrained agent of a run with settings cfg (its network, features, action heads and
+    greedy rule)."""
     return Agent(cfg.n_blocks, n_x=N_X, n_y=1 if cfg.action == "drop" else cfg.n_blocks,
                  hidden=cfg.hidden, seed=cfg.seed, mlp_backward=mlp_backward, dtype=cfg.dtype,
-                 network=cfg.network, features=cfg.features)
+                 network=cfg.network, features=cfg.features, greedy=cfg.greedy)
 
 
 def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=silent, log=print,

@@ -26,6 +26,7 @@ import numpy as np
 from tqdm import tqdm
 
 import taskexp
+from agent import GREEDY
 from taskexp import RunState
 from taskexp_lib.checkpoint import load_state, save_json, save_state, saved_results
 from taskexp_lib.config import TUPLES, Config, saved_config
@@ -44,7 +45,7 @@ CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",
            "shapes": tuple(SHAPES), "families": tuple(FAMILIES),
            "dtype": ("float32", "float64"),
            "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place"),
-           "parts_in": ("all", "bc")}
+           "parts_in": ("all", "bc"), "greedy": GREEDY}
 MIN_ZERO = {"seed", "rounds", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add",
             "goal_parts", "base_pairs", "clear_pairs",
             "label_tasks", "label_top", "label_pair"}

@@ -153,6 +153,13 @@ class Config:
     """sec 5: fixed evaluation scenes per shape, the same after every round"""
     eval_salt: int = 12345
     """sec 5: the evaluation scenes come from the Generator seeded with [seed, eval_salt]"""
+    greedy: str = "joint"
+    """sec 5: the evaluation's deterministic action: joint (the most likely (block, x) pair) |
+    block (the most likely block, then its most likely x: each head's argmax, as the authors'
+    code takes it). Evaluation only. A block that must be cleared away can go to many x, so its
+    x-probability is spread and the joint rule passes it over for a goal block whose x is sure
+    (lab/notes.md, 2026-12-07, issue 53). A checkpoint does not carry it (Agent.load: joint);
+    lab/bench/greedy.py tries a checkpoint with both"""
     baseline: str = ""
     """sec 5.3: "direct-ppo" replaces task expansion by PPO on the evaluation tasks"""
     shapes: tuple = ("I", "Y", "3T")
@@ -183,7 +190,8 @@ ADDED = {"other_orders": False,                                # 2026-12-04
          # evaluation only: a run made before learns the same, and is tried on them from its
          # next round on
          "families": ("blocked", "air"),
-         "eval_blocks": (7, 8)}                                  # 2026-12-06, evaluation only
+         "eval_blocks": (7, 8),                                  # 2026-12-06, evaluation only
+         "greedy": "joint"}                                      # 2026-12-07, evaluation only
 # Fields removed since, each with the only value today's code can go on with: they served variants
 # whose findings are in lab/notes.md (hard_picks, label_later_*: measured at main f915fea;
 # distill_data: at ba5e9fb)

@@ -227,6 +227,27 @@ def test_sampling_frequencies_match_probabilities_and_mode_is_joint_argmax():
     assert tuple(ActionDist(out, n_x).mode()[0]) == tuple(joint[p.argmax()])
 
 
+def test_block_mode_takes_the_likeliest_block_whatever_its_x():
+    """block_mode: argmax_b pi(b), then argmax_x pi(x | b), checked against the probabilities
+    summed by hand; and the case where it and the joint mode part: block 0 is the likeliest
+    block but its x is spread over four bins (a block to clear away), block 1's x is sure."""
+    rng, out, _, n_x = action_setup(seed=12, B=64, n=3, n_x=4, n_y=2, scale=2.0)
+    joint = np.array(np.meshgrid(range(3), range(4), range(2), indexing="ij")).reshape(3, -1).T
+    dist = ActionDist(out, n_x)
+    for k in range(len(out)):
+        p = np.exp(ActionDist(np.repeat(out[k:k + 1], len(joint), 0), n_x).log_prob(joint))
+        p = p.reshape(3, 4, 2)
+        b = p.sum((1, 2)).argmax()                                 # the block's marginal
+        x, y = np.unravel_index(p[b].argmax(), (4, 2))
+        assert tuple(dist.block_mode()[k]) == (b, x, y)
+    assert (dist.block_mode() != dist.mode()).any(1).sum() > 5       # the two rules part often
+    out = np.zeros((1, 2, 1 + 4 + 1))
+    out[0, :, 0] = [1.0, 0.0]                                      # pi(b): 0.73, 0.27
+    out[0, 1, 1 + 2] = 5.0                                         # block 1: x = 2, p 0.98
+    assert tuple(ActionDist(out, 4).block_mode()[0]) == (0, 0, 0)
+    assert tuple(ActionDist(out, 4).mode()[0]) == (1, 2, 0)        # 0.27 * 0.98 > 0.73 / 4
+
+
 # ----------------------------------------------------------------------------- features, API
 
 def test_featurize_codes():
@@ -330,6 +351,13 @@ def test_act_value_sample_shapes_and_errors():
         assert agent.act(np.zeros((4, 6)), deterministic=True)[2] < 4      # a layer it has
     with pytest.raises(ValueError):
         agent.bc(obs, np.array([[0, 37, 0]] * 5), 1, 4, 1e-3, rng)   # x-bin out of range
+    # the greedy rule (Config.greedy): the joint mode by default, block_mode when asked
+    f = agent.features(obs)
+    assert np.array_equal(ab, agent.policy(f).mode())
+    agent.greedy = "block"
+    assert np.array_equal(agent.act(obs, deterministic=True), agent.policy(f).block_mode())
+    with pytest.raises(ValueError, match="greedy 'first'"):
+        Agent(hidden=16, greedy="first")
 
 
 def test_adam_and_clip_grad_norm():

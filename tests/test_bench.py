@@ -333,3 +333,21 @@ def test_the_probe_pairs_differ_in_one_goal_and_its_control_scores_half():
     assert probe.probe_accuracy(np.ones((40, 3)), y, train) == 0.5     # rows alike: one guess
     X[:, 0] += 3 * y                                                  # a column that tells them
     assert probe.probe_accuracy(X, y, train) == 1.0
+
+
+def test_greedy_tries_a_checkpoint_with_both_rules_on_the_runs_tests(tmp_path):
+    """lab/bench/greedy.py: every test a run makes after a round (the shapes, the families, the
+    other worlds), once per rule of Config.greedy, on the same scenes."""
+    import greedy
+
+    from agent import GREEDY, Agent
+    Agent(6, n_x=37, n_y=1, hidden=16, seed=0).save(tmp_path / "round0.npz")
+    found = greedy.measure(str(tmp_path / "round0.npz"), episodes=2)
+    assert list(found) == list(GREEDY)
+    for r in found.values():
+        assert list(r) == ["eval", "families", "blocks"] and list(r["blocks"]) == ["7", "8"]
+        assert list(r["families"]) == list(Config.families)
+        assert [name for name, _ in greedy.summary(r)] == ["I/Y/3T", "blocked", "air",
+                                                           "7 blocks", "8 blocks"]
+    cfg = greedy.run_config(str(tmp_path / "round0.npz"), seed=3)
+    assert cfg.seed == 3 and cfg.greedy == "joint"            # no results.json: the defaults

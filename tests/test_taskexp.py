@@ -223,6 +223,25 @@ def test_cli_network_features_and_action_reach_the_agent(tmp_path, flags, networ
     assert agent.features(np.zeros((1, 6, 6))).shape[-1] == (52 if features == "plain" else 78)
 
 
+def test_the_greedy_rule_reaches_the_evaluation(capsys):
+    """--greedy block: the run's agent takes block_mode when evaluate asks for the greedy action;
+    the default stays the joint mode; a rule that does not exist is refused."""
+    cfg, *_ = cli.parse_args(["--greedy", "block", "--hidden", "16", "--eval-episodes", "4"])
+    assert cfg.greedy == "block" and taskexp.Config().greedy == "joint"
+    agent, env = taskexp.make_agent(cfg), BlockWorld(cfg.n_blocks)
+    assert agent.greedy == "block"
+    tasks = shapes.eval_tasks(cfg, env)["I"]
+    dists = []                                       # the policy at every step, in order
+    agent.policy = lambda f, policy=agent.policy: dists.append(policy(f)) or dists[-1]
+    trajs = taskexp.run_episodes(agent, tasks, [env], deterministic=True)   # one at a time
+    taken = np.concatenate([t.actions for t in trajs])
+    assert np.array_equal(taken, np.concatenate([d.block_mode() for d in dists]))
+    assert not np.array_equal(taken, np.concatenate([d.mode() for d in dists]))
+    with pytest.raises(SystemExit):
+        cli.parse_args(["--greedy", "first"])
+    assert "--greedy: invalid choice" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize("flags", [["--select", "init2new", "--no-restrict"],
                                    ["--baseline", "direct-ppo"]])
 def test_cli_ablations_run(tmp_path, flags):

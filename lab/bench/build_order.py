@@ -5,7 +5,8 @@
     python lab/bench/build_order.py runs/ours-seed0/round1.npz --json order.json --plot order.png
 
 Runs each checkpoint's greedy policy on the evaluation scenes of the held-out shapes (the run's
-own: the seed comes from the run's results.json beside the checkpoint, else --seed) and sorts its
+own: the seed comes from the run's results.json beside the checkpoint, else --seed; the greedy
+rule from --greedy, else the run's own) and sorts its
 moves as report.move_kind does: "right" moves a block of the lowest layer whose goals are not met
 yet to its goal's x; "higher goal" moves a block whose goal lies above a pending one, before its
 support stands. Prints, per shape,
@@ -27,7 +28,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..")))
 import taskexp  # noqa: E402
-from agent import Agent  # noqa: E402
+from agent import GREEDY, Agent  # noqa: E402
 from env2d import run_worlds  # noqa: E402
 from taskexp_lib import one_blas_thread  # noqa: E402
 from taskexp_lib.geometry import is_success  # noqa: E402
@@ -38,13 +39,25 @@ from taskexp_lib.stats import MOVE_KINDS, move_kind  # noqa: E402
 FIRST_WRONG = MOVE_KINDS[1:] + ("all right",)    # "higher goal" there: before its support
 
 
-def run_seed(checkpoint, default):
-    """The seed of the run the checkpoint belongs to (its results.json), else `default`."""
+def run_settings(checkpoint):
+    """The saved settings of the run the checkpoint belongs to (its results.json beside it), as
+    a dict; {} when there is none."""
     path = os.path.join(os.path.dirname(os.path.abspath(checkpoint)), "results.json")
     if not os.path.exists(path):
-        return default
+        return {}
     with open(path) as f:
-        return json.load(f)["config"]["seed"]
+        return json.load(f)["config"]
+
+
+def run_seed(checkpoint, default):
+    """The seed of the run the checkpoint belongs to (its results.json), else `default`."""
+    return run_settings(checkpoint).get("seed", default)
+
+
+def greedy_rule(checkpoint, given=None):
+    """The rule of the greedy action (Config.greedy) to try a checkpoint with: `given`, else the
+    run's own (its results.json), else the joint mode. A checkpoint does not carry it."""
+    return given or run_settings(checkpoint).get("greedy", "joint")
 
 
 def first_wrong(traj):
@@ -60,10 +73,11 @@ def first_wrong(traj):
     return "all right", None
 
 
-def measure(checkpoint, seed=0, episodes=100):
+def measure(checkpoint, seed=0, episodes=100, greedy=None):
     """The indicator for one checkpoint -> {shape: {first_move: {kind: share}, first_wrong:
     {kind: share}, first_wrong_step: mean step, success: share}}."""
     agent = Agent.load(checkpoint)
+    agent.greedy = greedy_rule(checkpoint, greedy)
     cfg = taskexp.Config(seed=run_seed(checkpoint, seed), eval_episodes=episodes,
                          action="drop" if agent.drops else "place")
     envs, _ = run_worlds(cfg)
@@ -127,6 +141,8 @@ def checkpoint_parser(description, nargs="+"):
     p.add_argument("--episodes", type=int, default=100, help="evaluation scenes per task")
     p.add_argument("--seed", type=int, default=0,
                    help="the evaluation scenes' seed when no results.json lies beside a checkpoint")
+    p.add_argument("--greedy", choices=GREEDY,
+                   help="the greedy action's rule (Config.greedy); default: the run's own")
     return p
 
 
@@ -143,7 +159,7 @@ def main():
     paths = expand(a.checkpoints)
     by_checkpoint = {}
     for path in paths:
-        m = by_checkpoint[path] = measure(path, a.seed, a.episodes)
+        m = by_checkpoint[path] = measure(path, a.seed, a.episodes, a.greedy)
         pc = lambda share: f"{100 * share:3.0f}%"
         print(f"{path}")
         print("  shape  success  first move: " + " / ".join(MOVE_KINDS))

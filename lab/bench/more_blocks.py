@@ -20,7 +20,7 @@ import warnings
 import numpy as np
 
 import taskexp
-from agent import Agent, OtherWorldWarning
+from agent import GREEDY, Agent, OtherWorldWarning
 from env2d import physics_pool
 from taskexp_lib import one_blas_thread
 from taskexp_lib.checkpoint import save_json
@@ -54,6 +54,7 @@ def record(run, workers=2):
                  for n in cfg.eval_blocks}
         for k, rnd in enumerate(results["rounds"]):
             agent = Agent.load(os.path.join(run, f"round{k}.npz"))
+            agent.greedy = cfg.greedy                   # the run's rule, as train tries it
             blocks = taskexp.zero_shot(agent, tests)
             first = {key: rnd.pop(key) for key in ("round", "eval", "families") if key in rnd}
             results["rounds"][k] = {**first, "blocks": blocks, **rnd}
@@ -72,6 +73,8 @@ def main():
                    help="block counts (default: the run's own and its eval_blocks)")
     p.add_argument("--record", action="store_true",
                    help="write every round's figures in cfg.eval_blocks into results.json")
+    p.add_argument("--greedy", choices=GREEDY,
+                   help="the greedy action's rule (Config.greedy); default: the run's own")
     a = p.parse_args()
     if a.record:
         return record(a.run)
@@ -80,6 +83,7 @@ def main():
     cfg = saved_config(results["config"])
     k = results["rounds"][-1]["round"] if a.round is None else a.round
     agent = Agent.load(os.path.join(a.run, f"round{k}.npz"))
+    agent.greedy = a.greedy or cfg.greedy
     counts = a.blocks or [cfg.n_blocks, *cfg.eval_blocks]
     print(f"{a.run} round {k}, the weights learnt with {cfg.n_blocks} blocks")
     print("| blocks | shape | success | site free | success where free | where not |")

@@ -8,9 +8,10 @@ seconds.
 A blocked site and a goal in the air (taskexp_lib/shapes.py, FAMILIES) are solved only by moving a
 block that no goal names: away from the site, or under the goal. For each checkpoint it runs the
 greedy policy on the run's own family scenes (the seed from the run's results.json beside it,
-else --seed) and prints, per task, the zero-shot success and the share of first moves, and of all
-moves, that move a block no goal names. With --data it reads a run's state.npz and prints the
-share of the BC buffer's steps that do (the data must show such moves before a policy makes them).
+else --seed; the greedy rule --greedy, else the run's own) and prints, per task, the zero-shot
+success and the share of first moves, and of all moves, that move a block no goal names. With
+--data it reads a run's state.npz and prints the share of the BC buffer's steps that do (the
+data must show such moves before a policy makes them).
 """
 import os
 import sys
@@ -18,7 +19,7 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..")))
-from build_order import checkpoint_parser, expand, run_seed  # noqa: E402
+from build_order import checkpoint_parser, expand, greedy_rule, run_seed  # noqa: E402
 
 import taskexp  # noqa: E402
 from agent import Agent  # noqa: E402
@@ -29,9 +30,10 @@ from taskexp_lib.rollout import run_episodes  # noqa: E402
 from taskexp_lib.shapes import FAMILIES, family_tasks  # noqa: E402
 
 
-def measure(checkpoint, seed=0, episodes=100):
+def measure(checkpoint, seed=0, episodes=100, greedy=None):
     """-> {family: {task: {success, first_unnamed, unnamed}}} for one checkpoint."""
     agent = Agent.load(checkpoint)
+    agent.greedy = greedy_rule(checkpoint, greedy)
     cfg = taskexp.Config(seed=run_seed(checkpoint, seed), eval_episodes=episodes,
                          families=tuple(FAMILIES), n_blocks=agent.n_blocks)
     envs, _ = run_worlds(cfg)
@@ -70,7 +72,7 @@ def main():
     for path in expand(a.checkpoints):
         print(path)
         print("  family   task        success  first move unnamed  all moves unnamed")
-        for family, tasks in measure(path, a.seed, a.episodes).items():
+        for family, tasks in measure(path, a.seed, a.episodes, a.greedy).items():
             for name, r in tasks.items():
                 print(f"  {family:8s} {name:10s}  {pc(r['success'])}    {pc(r['first_unnamed'])}"
                       f"               {pc(r['unnamed'])}")
