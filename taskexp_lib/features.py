@@ -39,7 +39,7 @@ def feature_columns(n_y, features):
 
 def featurize(obs, n_y, features):
     """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, F), laid out as
-    feature_layout(n_y, features) says (F = 10 + 2 N_RBF plain, 15 + 3 N_RBF with the relations).
+    feature_layout(n_y, features) says (F = 10 + 2 N_RBF plain, 16 + 3 N_RBF with the relations).
 
     Besides normalised pose, goal and offset to goal, each block gets RBF codes of its x and goal
     x: what it is and where it wants to be, on its own. Heights are numbers only. A one-hot code
@@ -77,7 +77,7 @@ def featurize(obs, n_y, features):
 
 
 # Hand-computed stacking preconditions: what self-attention over blocks would have to learn.
-RELATIONS = ("blocked", "supported", "wait", "first", "covered")
+RELATIONS = ("blocked", "supported", "wait", "first", "covered", "in_the_way")
 
 
 def relations(x, y, gx, gy, g, at_goal):
@@ -89,6 +89,9 @@ def relations(x, y, gx, gy, g, at_goal):
       wait        another unreached goal lies under mine: that block must go first
       first       my goal lies under another block's goal: I am its support
       covered     a block rests on me now
+      in_the_way  I stand on the spot of another block's goal not met yet: "blocked" seen from
+                  the block that must move away first (what the policy picks is a block, so the
+                  fact must be in the blocker's token, not only in the goal block's)
       held        my goal is on the table, or blocks now under my goal spot hold a block up
                   there: one under its centre ("supported"), or one under each of its halves
                   (the stem of "Y" on its two legs, which "supported" misses)
@@ -110,7 +113,8 @@ def relations(x, y, gx, gy, g, at_goal):
         supported=g * np.maximum(gy < h, any_j(below & (np.abs(dx) < w / 2))),
         wait=g * any_j(pending[:, None, :] * (near(gx, gx, w) & near(gy, gy - h, h / 2))),
         first=g * any_j(g[:, None, :] * (near(gx, gx, w) & near(gy - h, gy, h / 2))),
-        covered=any_j(near(x, x, w) & near(y - h, y, h / 2)))
+        covered=any_j(near(x, x, w) & near(y - h, y, h / 2)),
+        in_the_way=any_j(pending[:, None, :] * (near(gx, x, w * 0.95) & near(gy, y, h * 0.95))))
     both_halves = any_j(under & (dx < 0)) * any_j(under & (dx > 0))
     out["held"] = np.maximum(out["supported"], g * both_halves)
     out["needs_support"] = pending * (1.0 - out["held"])

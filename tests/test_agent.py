@@ -256,7 +256,7 @@ def test_featurize_codes():
     obs[0, 0, 3:] = [0.005, 0.025, 1.0]                         # satisfied (0.5 cm away)
     obs[0, 1, 3:] = [-0.2, 0.125, 1.0]                          # not satisfied
     f, col = featurize(obs, 3, "relations")[0], feature_columns(3, "relations")
-    assert f.shape == (3, 15 + 3 * 21) and max(c.stop for c in col.values()) == f.shape[-1]
+    assert f.shape == (3, 16 + 3 * 21) and max(c.stop for c in col.values()) == f.shape[-1]
     assert list(f[:, col["at_goal"]][:, 0]) == [1, 0, 0]
     # heights are numbers, the same scale for a layer no demonstration has reached: no layer code
     assert not any("layer" in name for name in col)
@@ -305,10 +305,11 @@ def test_relations():
     assert r["blocked"] == [1, 0, 0] and r["supported"] == [1, 1, 0]   # 2 is under 1's goal spot
     assert r["wait"] == [0, 1, 0] and r["first"] == [1, 0, 0] and not any(r["covered"])
     assert not any(r["needs_support"])
+    assert r["in_the_way"] == [0, 0, 1]                         # 2 stands on 0's goal spot
     x[2] = 0.4                                      # block 2 moves away: 1's goal hangs in the air
     r = relation_table(x, y, gx, gy, g)
     assert r["blocked"] == [0, 0, 0] and r["supported"] == [1, 0, 0]
-    assert r["needs_support"] == [0, 1, 0]
+    assert r["needs_support"] == [0, 1, 0] and not any(r["in_the_way"])
     x[2] = 0.01
     y[1], x[1] = 0.075, 0.02                        # block 1 now rests on block 2
     r = relation_table(x, y, gx, gy, g)

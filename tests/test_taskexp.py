@@ -220,7 +220,7 @@ def test_cli_network_features_and_action_reach_the_agent(tmp_path, flags, networ
     agent = Agent.load(os.path.join(out, "round1.npz"))
     assert (agent.network, agent.feature_set, agent.n_y) == (network, features, n_y)
     assert res["config"]["action"] == ("drop" if n_y == 1 else "place")
-    assert agent.features(np.zeros((1, 6, 6))).shape[-1] == (52 if features == "plain" else 78)
+    assert agent.features(np.zeros((1, 6, 6))).shape[-1] == (52 if features == "plain" else 79)
 
 
 def test_the_greedy_rule_reaches_the_evaluation(capsys):
