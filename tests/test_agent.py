@@ -409,11 +409,14 @@ def test_load_rejects_bad_files(tmp_path):
              **{**data, "geometry": data["geometry"] * [1, 2, 1, 1, 1, 1, 1]})
     np.savez(tmp_path / "state.npz", **{**data, "state_version": np.array(1)})
     np.savez(tmp_path / "features.npz", **{**data, "features": np.array("hand")})
+    first = {k: v[:-1] for k, v in data.items() if k.endswith("phi.W0")}   # one feature fewer
+    np.savez(tmp_path / "columns.npz", **{**data, **first})
     for name, msg in [("truncated.npz", "readable"), ("garbage.npz", "readable"),
                       ("notes.txt", "not a checkpoint"), ("version.npz", "99"),
                       ("sizes.npz", "sizes"), ("shape.npz", "actor.rho.W1"),
                       ("missing.npz", "critic.phi.b0"), ("world.npz", r"'block_h': \(0.1, 0.05\)"),
-                      ("state.npz", r"round\{k\}.npz"), ("features.npz", "features 'hand'")]:
+                      ("state.npz", r"round\{k\}.npz"), ("features.npz", "features 'hand'"),
+                      ("columns.npz", "read 78 feature columns, the 'relations' features have 79")]:
         with pytest.raises(ValueError, match=msg) as e:
             Agent.load(tmp_path / name)
         assert name in str(e.value) and "allow_pickle" not in str(e.value)

@@ -6,10 +6,9 @@
 
 Runs each checkpoint's greedy policy on the evaluation scenes of the held-out shapes (the run's
 own: the seed comes from the run's results.json beside the checkpoint, else --seed; the greedy
-rule from --greedy, else the run's own) and sorts its
-moves as report.move_kind does: "right" moves a block of the lowest layer whose goals are not met
-yet to its goal's x; "higher goal" moves a block whose goal lies above a pending one, before its
-support stands. Prints, per shape,
+rule from --greedy, else the run's own) and sorts its moves as report.move_kind does: "right"
+moves a block of the lowest layer whose goals are not met yet to its goal's x; "higher goal"
+moves a block whose goal lies above a pending one, before its support stands. Prints, per shape,
   - the first move of the episodes, by kind;
   - the first move of each episode that is wrong, by kind, and the mean step it came at: not
     "right", and not a higher goal put on its support ("all right": none, the episode built the
@@ -134,15 +133,17 @@ def plot(by_checkpoint, path):
     fig.savefig(path, dpi=120)
 
 
-def checkpoint_parser(description, nargs="+"):
-    """The command line of a script that measures checkpoints on a run's evaluation scenes."""
+def checkpoint_parser(description, nargs="+", greedy=True):
+    """The command line of a script that measures checkpoints on a run's evaluation scenes
+    (greedy: and runs their greedy policy, by the rule --greedy names)."""
     p = argparse.ArgumentParser(description=description)
     p.add_argument("checkpoints", nargs=nargs, help="round{k}.npz files (a glob is expanded)")
     p.add_argument("--episodes", type=int, default=100, help="evaluation scenes per task")
     p.add_argument("--seed", type=int, default=0,
                    help="the evaluation scenes' seed when no results.json lies beside a checkpoint")
-    p.add_argument("--greedy", choices=GREEDY,
-                   help="the greedy action's rule (Config.greedy); default: the run's own")
+    if greedy:
+        p.add_argument("--greedy", choices=GREEDY,
+                       help="the greedy action's rule (Config.greedy); default: the run's own")
     return p
 
 

@@ -25,7 +25,7 @@ from dataclasses import replace
 import numpy as np
 
 sys.path.insert(0, os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..")))
-from build_order import checkpoint_parser, expand  # noqa: E402
+from build_order import checkpoint_parser, expand, run_settings  # noqa: E402
 
 import taskexp  # noqa: E402
 from agent import GREEDY, Agent  # noqa: E402
@@ -37,11 +37,8 @@ from taskexp_lib.config import saved_config  # noqa: E402
 def run_config(checkpoint, seed=0):
     """The settings of the run a checkpoint belongs to (its results.json), else the defaults
     with `seed` for the checkpoint's world."""
-    path = os.path.join(os.path.dirname(os.path.abspath(checkpoint)), "results.json")
-    if os.path.exists(path):
-        with open(path) as f:
-            return saved_config(json.load(f)["config"])
-    return taskexp.Config(seed=seed)
+    settings = run_settings(checkpoint)
+    return saved_config(settings) if settings else taskexp.Config(seed=seed)
 
 
 def measure(checkpoint, seed=0, episodes=100, salt=None, workers=1):
@@ -73,7 +70,7 @@ def summary(r):
 
 
 def main():
-    p = checkpoint_parser(__doc__.split("\n")[0])
+    p = checkpoint_parser(__doc__.split("\n")[0], greedy=False)     # both rules, always
     p.add_argument("--salt", type=int, help="other evaluation scenes: this Config.eval_salt")
     p.add_argument("--json", help="also write the figures to this file")
     p.add_argument("--workers", type=int, default=1, help="processes for the physics")

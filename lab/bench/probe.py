@@ -99,7 +99,7 @@ def measure(checkpoint, seed=0, episodes=100):
 
 
 def main():
-    a = checkpoint_parser(__doc__.split("\n")[0]).parse_args()
+    a = checkpoint_parser(__doc__.split("\n")[0], greedy=False).parse_args()  # no actions
     for path in expand(a.checkpoints):
         m = measure(path, a.seed, a.episodes)
         print(f"{path}: {m.pop('pairs')} minimal pairs; probe accuracy on held-out scenes: "
