@@ -88,17 +88,18 @@ class ActionDist:
 
     def mode(self):
         """-> the most likely joint action (B, 3): argmax_b [log pi(b) + max_x .. + max_y ..]."""
-        i = np.arange(self.shape[0])
-        b = (self.lb + self.lx.max(-1) + self.ly.max(-1)).argmax(-1)
-        return np.stack([b, self.lx[i, b].argmax(-1), self.ly[i, b].argmax(-1)], -1)
+        return self._with_best_place((self.lb + self.lx.max(-1) + self.ly.max(-1)).argmax(-1))
 
     def block_mode(self):
         """-> the most likely block, then its most likely x-bin and layer (B, 3): each head's
         argmax in the order the policy samples, as the authors' greedy action takes it. Unlike
         mode(), a block whose destination is spread (a block to clear away: many x are right)
         is not passed over for one whose destination is certain."""
+        return self._with_best_place(self.lb.argmax(-1))
+
+    def _with_best_place(self, b):
+        """blocks b (B,) -> actions (B, 3): each block with its most likely x-bin and layer."""
         i = np.arange(self.shape[0])
-        b = self.lb.argmax(-1)
         return np.stack([b, self.lx[i, b].argmax(-1), self.ly[i, b].argmax(-1)], -1)
 
     def backward(self, actions, a, c):

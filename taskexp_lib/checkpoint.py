@@ -141,11 +141,11 @@ def load_agent(cls, path, extra=()):
     if set(params) != stored:
         raise ValueError(f"{path}: keys do not match sizes {sizes}: "
                          f"{sorted(set(params) ^ stored)}")
-    width = agent.features(np.zeros((1, agent.n_blocks, 6))).shape[-1]     # feature columns
     for k, p in params.items():
         have = data[k]
         if have.shape != p.shape or have.dtype != p.dtype or not np.isfinite(have).all():
             # a first layer of another width: the feature set has changed since it was saved
+            width = agent.features(np.zeros((1, agent.n_blocks, 6))).shape[-1]
             other = have.ndim == 2 and p.shape[0] == width and have.shape[1:] == p.shape[1:]
             why = (f": its networks read {have.shape[0]} feature columns, the {features!r} "
                    f"features have {width} today (code of another day made it)" if other else "")

@@ -108,13 +108,16 @@ def relations(x, y, gx, gy, g, at_goal):
     # of the spot's; under: below and overlapping the spot, so that it carries part of it
     below, dx = near(y, gy - h, h / 2), x[:, None, :] - gx[:, :, None]
     under = below & (np.abs(dx) < w)
+    # (B, i, j): block j overlaps i's goal spot now; read the other way round (B, j, i), block i
+    # stands on j's goal spot
+    on_spot = near(x, gx, w * 0.95) & near(y, gy, h * 0.95)
     out = dict(
-        blocked=g * any_j(near(x, gx, w * 0.95) & near(y, gy, h * 0.95)),
+        blocked=g * any_j(on_spot),
         supported=g * np.maximum(gy < h, any_j(below & (np.abs(dx) < w / 2))),
         wait=g * any_j(pending[:, None, :] * (near(gx, gx, w) & near(gy, gy - h, h / 2))),
         first=g * any_j(g[:, None, :] * (near(gx, gx, w) & near(gy - h, gy, h / 2))),
         covered=any_j(near(x, x, w) & near(y - h, y, h / 2)),
-        in_the_way=any_j(pending[:, None, :] * (near(gx, x, w * 0.95) & near(gy, y, h * 0.95))))
+        in_the_way=any_j(pending[:, None, :] * on_spot.transpose(0, 2, 1)))
     both_halves = any_j(under & (dx < 0)) * any_j(under & (dx > 0))
     out["held"] = np.maximum(out["supported"], g * both_halves)
     out["needs_support"] = pending * (1.0 - out["held"])

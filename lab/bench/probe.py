@@ -16,9 +16,9 @@ and every goal block i whose goal has a pending goal j right below it (features.
 in both. A least-squares linear probe (ridge) on block i's token (AttentionNet.encode: what the
 head reads) learns which of the two it is on the scenes of even index and is scored on the odd
 ones. The same probe on block i's own features is the control: with plain features it must
-score 50%. The blocks
-that no goal names in either ("free blocks") are probed too: without j's goal one of them must go
-under i's, with it none need move; the policy can act on that only if their tokens carry it.
+score 50%. The blocks that no goal names in either ("free blocks") are probed too: without j's
+goal one of them must go under i's, with it none need move; the policy can act on that only if
+their tokens carry it.
 """
 import os
 import sys
