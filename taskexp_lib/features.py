@@ -3,7 +3,8 @@ token, computed from an observation.
 
 "plain": a block's pose and its goal, on their own (the default). "relations": plus stacking
 preconditions computed by hand (RELATIONS), which a network over plain features must learn by
-comparing blocks (self-attention does). The world's geometry comes from geometry.py.
+comparing blocks (self-attention does). "relations+leave": plus, for a block in the way, a code
+of the spot it must leave (issue 53's lever L). The world's geometry comes from geometry.py.
 """
 import numpy as np
 
@@ -15,9 +16,10 @@ N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the tabl
 # The feature layout: (name, width) of each column group, in order; n_y (the number of layers)
 # scales heights.
 # Tests and notebooks find a feature by name (feature_columns), never by its column number.
-# The features: "plain" (what one block and its goal are) or "relations" (plus RELATIONS,
-# stacking preconditions computed by hand, which a network over plain features must learn).
-FEATURES = ("plain", "relations")
+# The features: "plain" (what one block and its goal are), "relations" (plus RELATIONS,
+# stacking preconditions computed by hand, which a network over plain features must learn) or
+# "relations+leave" (plus where a block in the way stands: the spot it must leave).
+FEATURES = ("plain", "relations", "relations+leave")
 
 
 def feature_layout(n_y, features):
@@ -26,7 +28,8 @@ def feature_layout(n_y, features):
              ("x_rbf", N_RBF), ("goal_x_rbf", N_RBF)]
     if features == "plain":
         return plain
-    return plain + [*[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
+    relations = plain + [*[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
+    return relations if features == "relations" else relations + [("spot_to_leave_rbf", N_RBF)]
 
 
 def feature_columns(n_y, features):
@@ -39,7 +42,8 @@ def feature_columns(n_y, features):
 
 def featurize(obs, n_y, features):
     """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, F), laid out as
-    feature_layout(n_y, features) says (F = 10 + 2 N_RBF plain, 16 + 3 N_RBF with the relations).
+    feature_layout(n_y, features) says (F = 10 + 2 N_RBF plain, 16 + 3 N_RBF with the relations,
+    16 + 4 N_RBF with relations+leave).
 
     Besides normalised pose, goal and offset to goal, each block gets RBF codes of its x and goal
     x: what it is and where it wants to be, on its own. Heights are numbers only. A one-hot code
@@ -49,7 +53,13 @@ def featurize(obs, n_y, features):
     carries what the lower layers taught up to the next one.
     Which block rests under which, or whose goal lies on whose, is a relation between two blocks:
     features="relations" adds hand-computed ones (RELATIONS); with "plain" the network must find
-    them itself (self-attention compares every pair of blocks).
+    them itself (self-attention compares every pair of blocks). Two relations come with an RBF
+    code of a place: where a goal waits for a support (needs_support: where a free block should
+    go), and, with "relations+leave", where a block in the way stands (in_the_way: the spot it
+    must leave). The x-head scores the x-bins of a block from its token, and a block to clear
+    away has no goal to aim at: with "relations" its x-head kept 30-60% of its mass within a
+    block width of where it stood after round 0, so that a cleared block often landed back on
+    the site (lab/notes.md, 2026-12-07, lever L).
     Goal columns are multiplied by has_goal, so "no goal" is all zeros; heights are divided by
     the height of n_y layers.
     """
@@ -72,8 +82,11 @@ def featurize(obs, n_y, features):
     if features == "plain":
         return np.concatenate(plain, axis=-1)
     rel = relations(x, y, gx, gy, g, at_goal)
-    return np.concatenate([*plain, np.stack([rel[name] for name in RELATIONS], -1),
-                           rel["needs_support"][..., None] * rbf(gx)], axis=-1)
+    spots = [rel["needs_support"][..., None] * rbf(gx)]
+    if features == "relations+leave":
+        spots.append(rel["in_the_way"][..., None] * rbf(x))
+    return np.concatenate([*plain, np.stack([rel[name] for name in RELATIONS], -1), *spots],
+                          axis=-1)
 
 
 # Hand-computed stacking preconditions: what self-attention over blocks would have to learn.

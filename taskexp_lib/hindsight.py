@@ -15,7 +15,7 @@ of it names still moves: what the demonstration did not show already.
 """
 import numpy as np
 
-from .rollout import cut, replay
+from .rollout import Trajectory, cut, replay
 
 
 def goal_part(goals, rng):
@@ -28,23 +28,38 @@ def goal_part(goals, rng):
 
 def needed_moves(demos, envs, progress=None):
     """The demonstrations (each successful, under its own goals) without the moves their goals
-    hold without: one pass over the moves, first to last, each tried by replaying from s_0 the
+    hold without: one pass over the moves, first to last, each tried by playing from s_0 the
     moves kept so far minus that one (rollout.replay; a pass replays every demonstration at once).
-    Returns new Trajectories, in order. progress: a progress bar, advanced per pass."""
+    Returns new Trajectories, in order. progress: a progress bar, advanced per pass.
+
+    The physics is a function of the state and the action (BlockWorld.simulate), so the moves
+    kept before t need not be played again: each try starts from the state they reached in the
+    last trajectory that held (out[i]), which halves the actions simulated (the parts' share of
+    a run's time, lab/notes.md) and gives the same trajectories as a replay from s_0."""
     out = list(demos)
     keep = [np.ones(len(d.actions), bool) for d in demos]
     for t in range(max((len(d.actions) for d in demos), default=0)):
         tried = [i for i, d in enumerate(demos) if t < len(d.actions) and keep[i].sum() > 1]
-        plans = []
+        played_before = {i: int(keep[i][:t].sum()) for i in tried}       # the moves kept before t
+        # out[i] ends where its goals first hold: if that is within the moves before t, the goals
+        # hold without move t (and without every later one), as a replay from s_0 would find
+        held = [i for i in tried if played_before[i] >= len(out[i].actions)]
+        tried = [i for i in tried if played_before[i] < len(out[i].actions)]
+        starts, plans = [], []
         for i in tried:
-            without = keep[i].copy()
-            without[t] = False
-            plans.append(demos[i].actions[without])
-        played = replay([(demos[i].states[0], demos[i].goals) for i in tried], plans, envs)
-        for i, again in zip(tried, played):
+            later = keep[i].copy()
+            later[: t + 1] = False                                      # the kept moves after t
+            starts.append((out[i].states[played_before[i]], demos[i].goals))
+            plans.append(demos[i].actions[later])
+        for i in held:
+            keep[i][t] = False
+        for i, again in zip(tried, replay(starts, plans, envs)):
             if again.success:                    # the goals hold without move t: leave it out
                 keep[i][t] = False
-                out[i] = again
+                k = played_before[i]
+                out[i] = Trajectory(out[i].goals,
+                                    np.concatenate([out[i].states[:k + 1], again.states[1:]]),
+                                    np.concatenate([out[i].actions[:k], again.actions]), True)
         if progress is not None:
             progress.update(1)
     return out

@@ -278,6 +278,10 @@ def test_plain_features_are_the_relations_features_without_the_relations(tmp_pat
     assert np.array_equal(plain, full[..., : plain.shape[-1]])
     assert set(feature_columns(6, "relations")) - set(feature_columns(6, "plain")) == {*RELATIONS,
                                                                           "support_wanted_rbf"}
+    leave = featurize(obs, 6, "relations+leave")                # the relations, then one code more
+    assert np.array_equal(full, leave[..., : full.shape[-1]]) and leave.shape[-1] == 16 + 4 * 21
+    assert set(feature_columns(6, "relations+leave")) - set(feature_columns(6, "relations")) == {
+        "spot_to_leave_rbf"}
     agent = Agent(hidden=8, dtype="float64")                     # the defaults: plain features
     assert agent.features(obs).shape == plain.shape and agent.act(obs).shape == (3, 3)
     assert (agent.act(obs)[:, 2] == 0).all()
@@ -289,6 +293,22 @@ def test_plain_features_are_the_relations_features_without_the_relations(tmp_pat
         featurize(obs, 6, "hand")
     with pytest.raises(ValueError, match="features 'hand'"):
         Agent(hidden=8, features="hand")
+
+
+def test_a_block_in_the_way_codes_the_spot_it_must_leave():
+    """relations+leave's spot_to_leave_rbf: the RBF code of where a block in the way stands, zero
+    for the others; support_wanted_rbf: that of a goal that waits for a support."""
+    obs = np.zeros((1, 3, 6))
+    obs[0, :, :2] = [[-0.3, 0.025], [0.3, 0.025], [0.2, 0.025]]
+    obs[0, 0, 3:] = [0.2, 0.025, 1.0]                           # block 2 stands on 0's goal spot
+    obs[0, 1, 3:] = [-0.2, 0.075, 1.0]                          # 1's goal hangs in the air
+    f, col = featurize(obs, 3, "relations+leave")[0], feature_columns(3, "relations+leave")
+    leave, wanted = f[:, col["spot_to_leave_rbf"]], f[:, col["support_wanted_rbf"]]
+    assert not leave[:2].any() and np.allclose(leave[2], f[2, col["x_rbf"]])
+    assert leave[2].argmax() == 14                                  # x = 0.2, every 5 cm
+    assert not wanted[[0, 2]].any() and wanted[1].argmax() == 6     # under 1's goal, x = -0.2
+    obs[0, 2, 0] = 0.4                                              # 2 steps aside: none to leave
+    assert not featurize(obs, 3, "relations+leave")[0, :, col["spot_to_leave_rbf"]].any()
 
 
 def relation_table(x, y, gx, gy, g):

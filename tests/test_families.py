@@ -175,3 +175,38 @@ def test_the_indicator_counts_the_moves_of_blocks_no_goal_names(tmp_path):
         for r in tasks.values():
             assert all(0.0 <= r[k] <= 1.0 for k in ("success", "first_unnamed", "unnamed"))
             assert r["first_unnamed"] * 3 == round(r["first_unnamed"] * 3)     # of 3 scenes
+    assert all(0.0 <= r[k] <= 1.0 for r in m["blocked"].values()
+               for k in ("x_off_site", "best_x_off_site"))
+
+
+def test_the_indicator_finds_where_the_blocker_would_go(world):
+    """unnamed_blocks.blocker_sent_off reads the blocker's own x-head: a policy that sends every
+    block back where it stands scores 0, one that sends it to the farthest x-bin scores 1."""
+    import os
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "lab", "bench"))
+    import unnamed_blocks
+
+    from agent import ActionDist
+    tasks = shapes.family_tasks(Config(seed=0, eval_episodes=2), world)["blocked"]["I"]
+    xs = np.asarray(world.x_bins)
+
+    class Rigged:                               # every block's x-head certain of one bin
+        features = staticmethod(lambda obs: obs)
+
+        def __init__(self, pick):
+            self.pick = pick                    # (x-bins, the block's x) -> the bin
+
+        def policy(self, obs):
+            out = np.zeros((1, world.n_blocks, 1 + len(xs) + 1))
+            for i in range(world.n_blocks):
+                out[0, i, 1 + self.pick(xs, obs[0, i, 0])] = 50.0
+            return ActionDist(out, len(xs))
+
+    stay, away = Rigged(lambda xs, x: np.abs(xs - x).argmin()), Rigged(lambda xs, x: np.abs(
+        xs - x).argmax())
+    mass, best = unnamed_blocks.blocker_sent_off(stay, tasks, xs)
+    assert mass < 1e-9 and best == 0.0
+    mass, best = unnamed_blocks.blocker_sent_off(away, tasks, xs)
+    assert mass > 1 - 1e-9 and best == 1.0

@@ -9,9 +9,12 @@ A blocked site and a goal in the air (taskexp_lib/shapes.py, FAMILIES) are solve
 block that no goal names: away from the site, or under the goal. For each checkpoint it runs the
 greedy policy on the run's own family scenes (the seed from the run's results.json beside it,
 else --seed; the greedy rule --greedy, else the run's own) and prints, per task, the zero-shot
-success and the share of first moves, and of all moves, that move a block no goal names. With
---data it reads a run's state.npz and prints the share of the BC buffer's steps that do (the
-data must show such moves before a policy makes them).
+success and the share of first moves, and of all moves, that move a block no goal names; for
+the blocked family also where the policy would send the blocker at the start (the mass of its
+x-head a block width or more from the site, and how often its most likely x is there): a block
+picked to clear the site and sent back onto it clears nothing. With --data it reads a run's
+state.npz and prints the share of the BC buffer's steps that do (the data must show such moves
+before a policy makes them).
 """
 import os
 import sys
@@ -26,12 +29,31 @@ from agent import Agent  # noqa: E402
 from env2d import run_worlds  # noqa: E402
 from taskexp_lib import one_blas_thread  # noqa: E402
 from taskexp_lib.checkpoint import load_npz  # noqa: E402
+from taskexp_lib.geometry import BLOCK_H, BLOCK_W, observation  # noqa: E402
 from taskexp_lib.rollout import run_episodes  # noqa: E402
 from taskexp_lib.shapes import FAMILIES, family_tasks  # noqa: E402
 
 
+def blocker_sent_off(agent, tasks, x_bins):
+    """For blocked scenes [(s0, goals)]: the blocker's x-head at s0 -> (its mean mass on the x-bins
+    a block width or more from the site, the share of scenes whose most likely x is among them).
+    The blocker is the block no goal names that stands on a ground goal's spot
+    (shapes.blocked_state sets it down there)."""
+    mass, best = [], []
+    for s0, goals in tasks:
+        sites = [x for x, y in goals.values() if y < BLOCK_H]
+        b = next(i for i in range(len(s0)) if i not in goals and s0[i, 1] < BLOCK_H
+                 and min(abs(s0[i, 0] - x) for x in sites) < 1e-6)
+        p_x = np.exp(agent.policy(agent.features(observation(s0, goals)[None])).lx[0, b])
+        off = np.abs(np.asarray(x_bins) - s0[b, 0]) >= BLOCK_W
+        mass.append(p_x[off].sum())
+        best.append(off[p_x.argmax()])
+    return float(np.mean(mass)), float(np.mean(best))
+
+
 def measure(checkpoint, seed=0, episodes=100, greedy=None):
-    """-> {family: {task: {success, first_unnamed, unnamed}}} for one checkpoint."""
+    """-> {family: {task: {success, first_unnamed, unnamed[, x_off_site, best_x_off_site]}}} for
+    one checkpoint (the last two for the blocked family: blocker_sent_off)."""
     agent = Agent.load(checkpoint)
     agent.greedy = greedy_rule(checkpoint, greedy)
     cfg = taskexp.Config(seed=run_seed(checkpoint, seed), eval_episodes=episodes,
@@ -47,6 +69,9 @@ def measure(checkpoint, seed=0, episodes=100, greedy=None):
                 success=float(np.mean([t.success for t in trajs])),
                 first_unnamed=float(np.mean([u[0] for u in unnamed])),
                 unnamed=float(np.mean([x for u in unnamed for x in u])))
+            if family == "blocked":
+                off = blocker_sent_off(agent, tasks, envs[0].x_bins)
+                out[family][name].update(x_off_site=off[0], best_x_off_site=off[1])
     return out
 
 
@@ -71,11 +96,14 @@ def main():
     pc = lambda share: f"{100 * share:4.0f}%"
     for path in expand(a.checkpoints):
         print(path)
-        print("  family   task        success  first move unnamed  all moves unnamed")
+        print("  family   task        success  first move unnamed  all moves unnamed  "
+              "blocker's x off its site: mass / most likely")
         for family, tasks in measure(path, a.seed, a.episodes, a.greedy).items():
             for name, r in tasks.items():
+                off = (f"       {pc(r['x_off_site'])} / {pc(r['best_x_off_site'])}"
+                       if "x_off_site" in r else "")
                 print(f"  {family:8s} {name:10s}  {pc(r['success'])}    {pc(r['first_unnamed'])}"
-                      f"               {pc(r['unnamed'])}")
+                      f"               {pc(r['unnamed'])}{off}")
 
 
 if __name__ == "__main__":
