@@ -57,9 +57,9 @@ def featurize(obs, n_y, features):
     code of a place: where a goal waits for a support (needs_support: where a free block should
     go), and, with "relations+leave", where a block in the way stands (in_the_way: the spot it
     must leave). The x-head scores the x-bins of a block from its token, and a block to clear
-    away has no goal to aim at: with "relations" its x-head kept 30-60% of its mass within a
-    block width of where it stood after round 0, so that a cleared block often landed back on
-    the site (lab/notes.md, 2026-12-07, lever L).
+    away has no goal to aim at: with "relations" its x-head kept 26-61% of its mass within a
+    block width of where it stood after round 0 (seeds 0-4), so that a cleared block often
+    landed back on the site (lab/notes.md, 2026-12-07, lever L).
     Goal columns are multiplied by has_goal, so "no goal" is all zeros; heights are divided by
     the height of n_y layers.
     """
