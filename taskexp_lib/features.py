@@ -78,13 +78,14 @@ def featurize(obs, n_y, features):
     at_goal = g * (dist < THRESHOLD)
     cols = [(x - mid) / half, y / (n_y * h), np.cos(ang), np.sin(ang), g,
             g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h, at_goal]
-    plain = [np.stack(cols, -1), rbf(x), g[..., None] * rbf(gx)]
+    x_code = rbf(x)                             # where a block is; relations+leave reuses it
+    plain = [np.stack(cols, -1), x_code, g[..., None] * rbf(gx)]
     if features == "plain":
         return np.concatenate(plain, axis=-1)
     rel = relations(x, y, gx, gy, g, at_goal)
     spots = [rel["needs_support"][..., None] * rbf(gx)]
     if features == "relations+leave":
-        spots.append(rel["in_the_way"][..., None] * rbf(x))
+        spots.append(rel["in_the_way"][..., None] * x_code)
     return np.concatenate([*plain, np.stack([rel[name] for name in RELATIONS], -1), *spots],
                           axis=-1)
 
