@@ -220,7 +220,8 @@ class Agent:
     """Policy pi(b, x, y | s, g) and value V(s, g): two networks (AttentionNets, or SetNets with
     network="setnet") with separate Adam states, over featurize's plain features or, with
     features="relations", the hand-computed relations too ("relations+leave": and the spot a
-    block in the way must leave).
+    block in the way must leave; "relations+leave+stay": and whether a block is a support in
+    place).
 
     The defaults are Config's: attention over plain features in float32, for the world that drops
     blocks, whose action has no layer (n_y = 1). For the world that places blocks in layers, n_y

@@ -30,7 +30,9 @@ class Config:
     features: str = "plain"
     """sec 3: plain (each block's pose and goal) | relations (plus stacking preconditions
     computed by hand, features.RELATIONS: what the network would otherwise have to learn) |
-    relations+leave (plus, for a block in the way, a code of the spot it must leave)"""
+    relations+leave (plus, for a block in the way, a code of the spot it must leave) |
+    relations+leave+stay (plus, for a block that stands under a goal not met yet, that it is a
+    support in place)"""
     action: str = "drop"
     """sec 3: drop (pick a block and an x; it falls onto whatever lies there, so physics finds
     its height) | place (pick a layer too: a layer the demos never showed is never chosen)"""

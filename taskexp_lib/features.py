@@ -4,7 +4,9 @@ token, computed from an observation.
 "plain": a block's pose and its goal, on their own (the default). "relations": plus stacking
 preconditions computed by hand (RELATIONS), which a network over plain features must learn by
 comparing blocks (self-attention does). "relations+leave": plus, for a block in the way, a code
-of the spot it must leave (issue 53's lever L). The world's geometry comes from geometry.py.
+of the spot it must leave (issue 53's lever L). "relations+leave+stay": plus, for a block that
+already stands under a goal not met yet, that it is a support in place (lever S). The world's
+geometry comes from geometry.py.
 """
 import numpy as np
 
@@ -18,8 +20,9 @@ N_RBF = 21                      # RBF centres spaced BLOCK_W / 2 across the tabl
 # Tests and notebooks find a feature by name (feature_columns), never by its column number.
 # The features: "plain" (what one block and its goal are), "relations" (plus RELATIONS,
 # stacking preconditions computed by hand, which a network over plain features must learn) or
-# "relations+leave" (plus where a block in the way stands: the spot it must leave).
-FEATURES = ("plain", "relations", "relations+leave")
+# "relations+leave" (plus where a block in the way stands: the spot it must leave) or
+# "relations+leave+stay" (plus whether a block is a support in place, which must stay).
+FEATURES = ("plain", "relations", "relations+leave", "relations+leave+stay")
 
 
 def feature_layout(n_y, features):
@@ -29,7 +32,10 @@ def feature_layout(n_y, features):
     if features == "plain":
         return plain
     relations = plain + [*[(name, 1) for name in RELATIONS], ("support_wanted_rbf", N_RBF)]
-    return relations if features == "relations" else relations + [("spot_to_leave_rbf", N_RBF)]
+    if features == "relations":
+        return relations
+    leave = relations + [("spot_to_leave_rbf", N_RBF)]
+    return leave if features == "relations+leave" else leave + [("support_in_place", 1)]
 
 
 def feature_columns(n_y, features):
@@ -43,7 +49,7 @@ def feature_columns(n_y, features):
 def featurize(obs, n_y, features):
     """obs (B, n, 6) [x, y, angle, goal_x, goal_y, has_goal] -> features (B, n, F), laid out as
     feature_layout(n_y, features) says (F = 10 + 2 N_RBF plain, 16 + 3 N_RBF with the relations,
-    16 + 4 N_RBF with relations+leave).
+    16 + 4 N_RBF with relations+leave, 17 + 4 N_RBF with relations+leave+stay).
 
     Besides normalised pose, goal and offset to goal, each block gets RBF codes of its x and goal
     x: what it is and where it wants to be, on its own. Heights are numbers only. A one-hot code
@@ -59,7 +65,13 @@ def featurize(obs, n_y, features):
     must leave). The x-head scores the x-bins of a block from its token, and a block to clear
     away has no goal to aim at: with "relations" its x-head kept 26-61% of its mass within a
     block width of where it stood after round 0 (seeds 0-4), so that a cleared block often
-    landed back on the site (lab/notes.md, 2026-12-07, lever L).
+    landed back on the site (lab/notes.md, 2026-12-07, lever L). "relations+leave+stay" adds
+    support_in_place, the mirror of needs_support as in_the_way is of blocked: the block head
+    picks a block from its token, and a block that already stands under a goal in the air looks,
+    on its own, like the free block the goal wants there (its x code is the wanted spot's). With
+    lever L the policy picked such a support again and dropped it back into its column (pulled
+    from under a stack, a block lands on top: nothing built) in 64% of seed 2's "3 up" scenes
+    after round 3 (lab/notes.md, 2026-12-07, night).
     Goal columns are multiplied by has_goal, so "no goal" is all zeros; heights are divided by
     the height of n_y layers.
     """
@@ -84,8 +96,10 @@ def featurize(obs, n_y, features):
         return np.concatenate(plain, axis=-1)
     rel = relations(x, y, gx, gy, g, at_goal)
     spots = [rel["needs_support"][..., None] * rbf(gx)]
-    if features == "relations+leave":
+    if features != "relations":
         spots.append(rel["in_the_way"][..., None] * x_code)
+    if features == "relations+leave+stay":
+        spots.append(rel["support_in_place"][..., None])
     return np.concatenate([*plain, np.stack([rel[name] for name in RELATIONS], -1), *spots],
                           axis=-1)
 
@@ -97,7 +111,8 @@ RELATIONS = ("blocked", "supported", "wait", "first", "covered", "in_the_way")
 def relations(x, y, gx, gy, g, at_goal):
     """Pairwise facts about blocks and goals, pooled over the other blocks j (what attention finds).
 
-    All inputs (B, n).  Returns {name: (B, n)} for the RELATIONS and needs_support:
+    All inputs (B, n).  Returns {name: (B, n)} for the RELATIONS, needs_support and
+    support_in_place:
       blocked     another block overlaps my goal spot now (placing me there would be a no-op)
       supported   my goal is on the table, or another block rests right under my goal spot now
       wait        another unreached goal lies under mine: that block must go first
@@ -111,6 +126,10 @@ def relations(x, y, gx, gy, g, at_goal):
                   (the stem of "Y" on its two legs, which "supported" misses)
       needs_support  has goal, not reached, not held: a free block must go under it, and
                   the RBF code of its goal x (pooled) tells the free blocks where
+      support_in_place  I stand right under a goal spot not met yet (my centre within half a
+                  block width of its x, on a lower layer), and in no goal's way: I am part of
+                  its support, and moving me undoes it (pulled from under a stack, a block
+                  lands on top of it)
     """
     w, h = BLOCK_W, BLOCK_H
     other = 1.0 - np.eye(x.shape[1])                                   # (n, n): j != i
@@ -135,6 +154,9 @@ def relations(x, y, gx, gy, g, at_goal):
     both_halves = any_j(under & (dx < 0)) * any_j(under & (dx > 0))
     out["held"] = np.maximum(out["supported"], g * both_halves)
     out["needs_support"] = pending * (1.0 - out["held"])
+    # (B, i, j): block i stands in the column under j's goal spot, below it
+    column = near(gx, x, w / 2) & (y[:, :, None] < gy[:, None, :] - h / 2)
+    out["support_in_place"] = any_j(pending[:, None, :] * column) * (1.0 - out["in_the_way"])
     return out
 
 

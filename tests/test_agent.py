@@ -282,6 +282,10 @@ def test_plain_features_are_the_relations_features_without_the_relations(tmp_pat
     assert np.array_equal(full, leave[..., : full.shape[-1]]) and leave.shape[-1] == 16 + 4 * 21
     assert set(feature_columns(6, "relations+leave")) - set(feature_columns(6, "relations")) == {
         "spot_to_leave_rbf"}
+    stay = featurize(obs, 6, "relations+leave+stay")             # ... and one column more
+    assert np.array_equal(leave, stay[..., : leave.shape[-1]]) and stay.shape[-1] == 17 + 4 * 21
+    assert set(feature_columns(6, "relations+leave+stay")) - set(feature_columns(
+        6, "relations+leave")) == {"support_in_place"}
     agent = Agent(hidden=8, dtype="float64")                     # the defaults: plain features
     assert agent.features(obs).shape == plain.shape and agent.act(obs).shape == (3, 3)
     assert (agent.act(obs)[:, 2] == 0).all()
@@ -311,6 +315,27 @@ def test_a_block_in_the_way_codes_the_spot_it_must_leave():
     assert not featurize(obs, 3, "relations+leave")[0, :, col["spot_to_leave_rbf"]].any()
 
 
+def test_a_support_in_place_is_told_to_stay():
+    """relations+leave+stay's support_in_place: a block right under a goal not met yet, on a
+    lower layer; not one aside, not under a goal met already, not one in the way of a goal."""
+    obs = np.zeros((1, 3, 6))
+    obs[0, :, :2] = [[-0.3, 0.025], [0.01, 0.025], [0.3, 0.025]]
+    obs[0, 0, 3:] = [0.0, 0.175, 1.0]                           # "3 up": 0's goal three storeys up
+    f, col = featurize(obs, 6, "relations+leave+stay")[0], feature_columns(6,
+                                                                           "relations+leave+stay")
+    assert list(f[:, col["support_in_place"]]) == [0, 1, 0]    # 1 stands under it; 2 aside
+    obs[0, 0, :2] = [0.0, 0.175]                                # the goal met: nothing to keep
+    assert not featurize(obs, 6, "relations+leave+stay")[0, :, col["support_in_place"]].any()
+    # a tower's ground goal (block 0) and the one above it (block 1): block 2 stands on the
+    # ground goal's spot, under the other; it must leave, so it is no support
+    x, y = [-0.3, 0.3, 0.0], [0.025, 0.025, 0.025]
+    r = relation_table(x, y, [0.0, 0.0, 0.0], [0.025, 0.075, 0.0], [1.0, 1.0, 0.0])
+    assert r["in_the_way"] == [0, 0, 1] and not any(r["support_in_place"])
+    x[2] = 0.15                                 # aside: 0 is not blocked, and none is under 1
+    r = relation_table(x, y, [0.0, 0.0, 0.0], [0.025, 0.075, 0.0], [1.0, 1.0, 0.0])
+    assert not any(r["support_in_place"])
+
+
 def relation_table(x, y, gx, gy, g):
     """relations() for one scene of 3 blocks, as {name: list of 3 floats}."""
     rel = relations(*(np.array([v], float) for v in (x, y, gx, gy, g)), np.zeros((1, 3)))
@@ -335,7 +360,7 @@ def test_relations():
     r = relation_table(x, y, gx, gy, g)
     # 2 covered; 1's goal supported by 2
     assert r["covered"] == [0, 0, 1] and r["supported"][1] == 1
-    assert set(r) == set(RELATIONS) | {"held", "needs_support"}
+    assert set(r) == set(RELATIONS) | {"held", "needs_support", "support_in_place"}
 
 
 def test_a_goal_on_two_legs_is_held_up():

@@ -179,6 +179,31 @@ def test_the_indicator_counts_the_moves_of_blocks_no_goal_names(tmp_path):
                for k in ("x_off_site", "best_x_off_site"))
 
 
+def test_the_indicator_counts_a_support_moved_within_its_column():
+    """unnamed_blocks.supports_undone: a block that no goal names taken from under a goal and set
+    down under it again counts; one brought in from aside, or a goal block moved, does not."""
+    import os
+    import sys
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                    "lab", "bench"))
+    import unnamed_blocks
+    h = BLOCK_H
+    goals = {0: (0.0, 3.5 * h)}                                   # "3 up"
+    s0 = np.zeros((3, 6))
+    s0[:, 0], s0[:, 1] = [-0.3, 0.01, 0.3], h / 2                 # block 1 under the goal already
+
+    def moved(b, x, y):                                           # one move: s0 -> (s0, s1)
+        s1 = s0.copy()
+        s1[b, :2] = x, y
+        return Trajectory(goals, np.stack([s0, s1]), np.array([[b, 0, 0]]), False)
+    undone = moved(1, 0.0, h / 2)                                 # back into its own column
+    built = moved(2, 0.0, 1.5 * h)                                # a block from aside on top
+    goal_block = moved(0, 0.0, 1.5 * h)
+    assert unnamed_blocks.supports_undone([undone]) == 1.0
+    assert unnamed_blocks.supports_undone([built, goal_block]) == 0.0
+    assert unnamed_blocks.supports_undone([undone, built]) == 0.5
+
+
 def test_the_indicator_finds_where_the_blocker_would_go(world):
     """unnamed_blocks.blocker_sent_off reads the blocker's own x-head: a policy that sends every
     block back where it stands scores 0, one that sends it to the farthest x-bin scores 1."""

@@ -215,13 +215,15 @@ def test_labelled_outcomes_for_v_are_recorded_and_reproducible(tmp_path):
     ([], "attention", "plain", 1),                        # the defaults: drop, learn relations
     (["--network", "setnet", "--features", "relations", "--action", "place", "--warmup", "8"],
      "setnet", "relations", 6),                            # the earlier defaults, as options
-    (["--features", "relations+leave"], "attention", "relations+leave", 1)])   # issue 53's L
+    (["--features", "relations+leave"], "attention", "relations+leave", 1),    # issue 53's L
+    (["--features", "relations+leave+stay"], "attention", "relations+leave+stay", 1)])   # S
 def test_cli_network_features_and_action_reach_the_agent(tmp_path, flags, network, features, n_y):
     out, res = run_cli(tmp_path, *flags)
     agent = Agent.load(os.path.join(out, "round1.npz"))
     assert (agent.network, agent.feature_set, agent.n_y) == (network, features, n_y)
     assert res["config"]["action"] == ("drop" if n_y == 1 else "place")
-    width = {"plain": 52, "relations": 79, "relations+leave": 100}[features]
+    width = {"plain": 52, "relations": 79, "relations+leave": 100,
+             "relations+leave+stay": 101}[features]
     assert agent.features(np.zeros((1, 6, 6))).shape[-1] == width
 
 

@@ -12,7 +12,8 @@ else --seed; the greedy rule --greedy, else the run's own) and prints, per task,
 success and the share of first moves, and of all moves, that move a block no goal names; for
 the blocked family also where the policy would send the blocker at the start (the mass of its
 x-head a block width or more from the site, and how often its most likely x is there): a block
-picked to clear the site and sent back onto it clears nothing. With --data it reads a run's
+picked to clear the site and sent back onto it clears nothing; for the air family how often a
+support is undone (supports_undone). With --data it reads a run's
 state.npz and prints the share of the BC buffer's steps that do (the data must show such moves
 before a policy makes them).
 """
@@ -51,9 +52,24 @@ def blocker_sent_off(agent, tasks, x_bins):
     return float(np.mean(mass)), float(np.mean(best))
 
 
+def supports_undone(trajs):
+    """The share of the episodes `trajs` in which a move takes a block that no goal names from
+    right under a goal (its centre within half a block width of the goal's x) and it comes to
+    rest right under a goal again: a support moved within its column, which builds nothing (a
+    block pulled from under a stack lands on top of it)."""
+    undone = []
+    for t in trajs:
+        xs = [x for x, _ in t.goals.values()]
+        under = lambda state, b: min(abs(state[b, 0] - x) for x in xs) < BLOCK_W / 2
+        undone.append(any(b not in t.goals and under(t.states[i], b) and under(t.states[i + 1], b)
+                          for i, b in enumerate(int(a[0]) for a in t.actions)))
+    return float(np.mean(undone))
+
+
 def measure(checkpoint, seed=0, episodes=100, greedy=None):
-    """-> {family: {task: {success, first_unnamed, unnamed[, x_off_site, best_x_off_site]}}} for
-    one checkpoint (the last two for the blocked family: blocker_sent_off)."""
+    """-> {family: {task: {success, first_unnamed, unnamed[, x_off_site, best_x_off_site]
+    [, supports_undone]}}} for one checkpoint (x_off_site and best_x_off_site for the blocked
+    family: blocker_sent_off; supports_undone for the air family)."""
     agent = Agent.load(checkpoint)
     agent.greedy = greedy_rule(checkpoint, greedy)
     cfg = taskexp.Config(seed=run_seed(checkpoint, seed), eval_episodes=episodes,
@@ -72,6 +88,8 @@ def measure(checkpoint, seed=0, episodes=100, greedy=None):
             if family == "blocked":
                 off = blocker_sent_off(agent, tasks, envs[0].x_bins)
                 out[family][name].update(x_off_site=off[0], best_x_off_site=off[1])
+            if family == "air":
+                out[family][name].update(supports_undone=supports_undone(trajs))
     return out
 
 
@@ -97,11 +115,12 @@ def main():
     for path in expand(a.checkpoints):
         print(path)
         print("  family   task        success  first move unnamed  all moves unnamed  "
-              "blocker's x off its site: mass / most likely")
+              "blocker's x off its site: mass / most likely, or supports undone")
         for family, tasks in measure(path, a.seed, a.episodes, a.greedy).items():
             for name, r in tasks.items():
                 off = (f"       {pc(r['x_off_site'])} / {pc(r['best_x_off_site'])}"
-                       if "x_off_site" in r else "")
+                       if "x_off_site" in r else
+                       f"       {pc(r['supports_undone'])}" if "supports_undone" in r else "")
                 print(f"  {family:8s} {name:10s}  {pc(r['success'])}    {pc(r['first_unnamed'])}"
                       f"               {pc(r['unnamed'])}{off}")
 
