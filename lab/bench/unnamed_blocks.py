@@ -13,9 +13,8 @@ success and the share of first moves, and of all moves, that move a block no goa
 the blocked family also where the policy would send the blocker at the start (the mass of its
 x-head a block width or more from the site, and how often its most likely x is there): a block
 picked to clear the site and sent back onto it clears nothing; for the air family how often a
-support is undone (supports_undone). With --data it reads a run's
-state.npz and prints the share of the BC buffer's steps that do (the data must show such moves
-before a policy makes them).
+support is undone (supports_undone). With --data it reads a run's state.npz and prints the share
+of the BC buffer's steps that do (the data must show such moves before a policy makes them).
 """
 import os
 import sys
