@@ -1,5 +1,9 @@
 """Tests of the blocks no goal names: the evaluation families (blocked sites, goals in the air),
 their scripted builder, and the hindsight on goals that teaches them (taskexp_lib/hindsight.py)."""
+import importlib
+import os
+import sys
+
 import numpy as np
 import pytest
 
@@ -9,6 +13,16 @@ from taskexp_lib import hindsight, shapes
 from taskexp_lib.config import Config
 from taskexp_lib.geometry import BLOCK_H, BLOCK_W, is_success, layer, layer_y
 from taskexp_lib.rollout import Trajectory, cut, replay
+
+
+def unnamed_blocks_script():
+    """lab/bench/unnamed_blocks.py as a module, imported as the lab's scripts import each other
+    (their folder on the path)."""
+    bench = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "lab",
+                         "bench")
+    if bench not in sys.path:
+        sys.path.insert(0, bench)
+    return importlib.import_module("unnamed_blocks")
 
 
 @pytest.fixture
@@ -160,11 +174,7 @@ def test_clearing_pairs_drop_the_second_block_where_the_first_stood():
 def test_the_indicator_counts_the_moves_of_blocks_no_goal_names(tmp_path):
     """lab/bench/unnamed_blocks.py on an untrained checkpoint: every task measured, shares in
     0..1, and the first-move share is what the episodes' first actions say."""
-    import os
-    import sys
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                    "lab", "bench"))
-    import unnamed_blocks
+    unnamed_blocks = unnamed_blocks_script()
 
     from agent import Agent
     path = str(tmp_path / "round0.npz")
@@ -182,11 +192,7 @@ def test_the_indicator_counts_the_moves_of_blocks_no_goal_names(tmp_path):
 def test_the_indicator_counts_a_support_moved_within_its_column():
     """unnamed_blocks.supports_undone: a block that no goal names taken from under a goal and set
     down under it again counts; one brought in from aside, or a goal block moved, does not."""
-    import os
-    import sys
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                    "lab", "bench"))
-    import unnamed_blocks
+    unnamed_blocks = unnamed_blocks_script()
     h = BLOCK_H
     goals = {0: (0.0, 3.5 * h)}                                   # "3 up"
     s0 = np.zeros((3, 6))
@@ -207,11 +213,7 @@ def test_the_indicator_counts_a_support_moved_within_its_column():
 def test_the_indicator_finds_where_the_blocker_would_go(world):
     """unnamed_blocks.blocker_sent_off reads the blocker's own x-head: a policy that sends every
     block back where it stands scores 0, one that sends it to the farthest x-bin scores 1."""
-    import os
-    import sys
-    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
-                                    "lab", "bench"))
-    import unnamed_blocks
+    unnamed_blocks = unnamed_blocks_script()
 
     from agent import ActionDist
     tasks = shapes.family_tasks(Config(seed=0, eval_episodes=2), world)["blocked"]["I"]
