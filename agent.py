@@ -6,7 +6,7 @@ picks a block and a discrete target (x-bin, layer) for it. Sec 4.1 and 4.3: beha
 demonstrations (base skills, self-distillation); PPO fine-tuning with a sparse success reward.
 
   ActionDist           the factorised action distribution pi(b, x, y) = pi(b) pi(x | b) pi(y | b)
-  bc_loss, ppo_loss, value_loss, gae
+  bc_loss, ppo_loss, value_loss, aux_loss, gae
                        the losses with their gradients w.r.t. the network outputs, and GAE
   Agent                two networks (taskexp_lib/nets.py) over block features
                        (taskexp_lib/features.py), BC, PPO and value regression
@@ -25,7 +25,7 @@ from tqdm import tqdm
 
 from taskexp_lib import checkpoint
 from taskexp_lib.config import Config
-from taskexp_lib.features import featurize
+from taskexp_lib.features import AUX_FACTS, featurize, relation_targets
 from taskexp_lib.geometry import N_X, block_count
 from taskexp_lib.nets import NETWORKS
 from taskexp_lib.nn import Adam, check_finite, clip_grad_norm, mlp_backward
@@ -142,6 +142,16 @@ def bc_loss(out, actions, n_x, action_dist=None):
     return -dist.log_prob(actions).mean(), dist.backward(actions, -1.0 / B, 0.0)
 
 
+def aux_loss(out, targets):
+    """Auxiliary loss (not in the paper): each token's logits z (B, n, K) predict K facts t in
+    {0, 1} about its block (features.AUX_FACTS), by cross-entropy with logits, a mean over all:
+        L = mean [log(1 + e^z) - t z];   dL/dz = (sigmoid(z) - t) / (B n K)
+    -> (L, dL/d out)."""
+    z, t = np.asarray(out, dtype=np.float64), np.asarray(targets, dtype=np.float64)
+    loss = np.mean(np.logaddexp(0.0, z) - t * z)               # log(1 + e^z), stable for any z
+    return loss, (0.5 * (1.0 + np.tanh(0.5 * z)) - t) / z.size     # sigmoid(z), stable
+
+
 def ppo_loss(out, actions, logp_old, adv, n_x, clip, ent_coef):
     """Clipped surrogate with entropy bonus (Schulman et al. 2017); adv already normalised.
 
@@ -232,12 +242,17 @@ class Agent:
     mlp_backward(params, hs, dout) -> (grads, dx) is the backward pass of every MLP in them, and
     action_dist the class of the policy's distribution (default ActionDist): the library's, or a
     student's (exercise 7 trains with them).
+
+    aux > 0 (Config.aux_relations, not in the paper) gives the actor's head len(AUX_FACTS) more
+    outputs per token, which BC and PPO train, with weight aux, to predict its block's stacking
+    relations (aux_loss); the policy never reads them. They make the tokens that the policy
+    heads read carry the relations (lab/bench/probe.py found training took them away).
     """
 
     def __init__(self, n_blocks=Config.n_blocks, n_x=N_X, n_y=1, hidden=Config.hidden,
                  seed=Config.seed, mlp_backward=mlp_backward, dtype=Config.dtype,
                  action_dist=None, network=Config.network, features=Config.features,
-                 greedy=Config.greedy):
+                 greedy=Config.greedy, aux=Config.aux_relations):
         self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
         self.n_y = int(n_y)
         if greedy not in GREEDY:
@@ -251,7 +266,14 @@ class Agent:
         self.network, Net = network, NETWORKS[network]
         self.feature_set = features
         F = self.features(np.zeros((1, self.n_blocks, 6))).shape[-1]
-        self.actor = Net(F, hidden, 1 + self.n_x + self.n_y, seed=[seed, 0], out_scale=0.01,
+        if not aux >= 0:
+            raise ValueError(f"aux {aux!r}: the auxiliary loss's weight is 0 (off) or more")
+        self.aux = float(aux)
+        # the actor's outputs per token: the block logit, x-logits, layer logits (the policy's
+        # P columns), then, with aux > 0, one logit per fact of AUX_FACTS
+        self.n_policy = 1 + self.n_x + self.n_y
+        n_aux = len(AUX_FACTS) if self.aux > 0 else 0
+        self.actor = Net(F, hidden, self.n_policy + n_aux, seed=[seed, 0], out_scale=0.01,
                          mlp_backward=mlp_backward, dtype=self.dtype)
         self.critic = Net(F, hidden, 1, seed=[seed, 1], mlp_backward=mlp_backward,
                           dtype=self.dtype)
@@ -287,7 +309,7 @@ class Agent:
     def policy(self, f):
         """The action distribution at features f (B, n, F). In a world that places, with fewer
         layers than the agent learnt (n < n_y), only the layers that world has."""
-        out = self.actor.forward(f)
+        out = self.actor.forward(f)[..., :self.n_policy]
         if not self.drops and f.shape[1] < self.n_y:
             out = out[..., :1 + self.n_x + f.shape[1]]
         return self.action_dist(out, self.n_x)
@@ -331,8 +353,22 @@ class Agent:
         actions = np.asarray(actions, dtype=np.int64)
         self._check_actions(actions)
         loss = lambda out, a: bc_loss(out, a, self.n_x, self.action_dist)
+        if self.aux > 0:        # L_BC + aux L_aux: the targets are the actions and the facts
+            actions, loss = (actions, relation_targets(obs)), self._with_aux(loss)
         return self._fit("BC", self.actor, self.actor_opt, loss, obs, actions, epochs,
                          batch_size, lr, rng, max_grad_norm, bar=bar)
+
+    def _with_aux(self, policy_loss):
+        """policy_loss(out, a) -> (L, dL/dout) on the policy's columns  ->  the loss of the whole
+        head on targets (a, facts): L + aux L_aux(the fact columns, facts) (aux_loss)."""
+        P = self.n_policy
+
+        def loss(out, targets):
+            a, facts = targets
+            lp, dp = policy_loss(out[..., :P], a)
+            la, da = aux_loss(out[..., P:], facts)
+            return lp + self.aux * la, np.concatenate([dp, self.aux * da], -1)
+        return loss
 
     def fit_value(self, obs, returns, epochs, batch_size, lr, rng, max_grad_norm=None, bar=None):
         """Regress V(s, g) on returns (e.g. of demonstrations): L = mean 0.5 (V - R)^2.
@@ -368,7 +404,9 @@ class Agent:
             # for N = 100k
             f = self.features(inputs(obs[idx]))
             out = net.forward(f)
-            loss, dout = loss_fn(out, targets[idx])[:2]             # L and dL/dout
+            # targets, or a tuple of target arrays (BC with the auxiliary facts), of minibatch idx
+            batch = tuple(t[idx] for t in targets) if isinstance(targets, tuple) else targets[idx]
+            loss, dout = loss_fn(out, batch)[:2]                    # L and dL/dout
             return loss, net.backward(dout)                         # dL/dtheta, by backprop
 
         steps = epochs * -(-len(obs) // batch_size)
@@ -416,6 +454,8 @@ class Agent:
         adv = np.asarray(adv, dtype=np.float64)
         check_finite("PPO update: inputs", logp_old=logp_old, advantages=adv, returns=returns)
         features = self.features(obs)               # once: they do not change within the update
+        facts = relation_targets(obs) if self.aux > 0 else None           # aux_loss's targets
+        P = self.n_policy
         # the critic that computed the rollout's values V is the one before the update, and
         # GAE's returns are R = A + V, so R - V = A
         var_r = np.var(returns)
@@ -428,13 +468,16 @@ class Agent:
             gradients, the figures logged). actor, critic: the networks to run (copies of them
             that share their parameters, when the minibatch is split over the cores)."""
             f, a, lp, A = features[idx], actions[idx], logp_old[idx], adv[idx]
-            out = actor.forward(f)                                  # logits of pi(b, x, y)
+            out = actor.forward(f)               # logits of pi(b, x, y), then those of the facts
             # r = exp(log pi - log pi_old);  L = -mean min(r A, clip(r, 1-eps, 1+eps) A) - c_ent H
-            pl, dout = ppo_loss(out, a, lp, A, self.n_x, clip, ent_coef)
+            pl, dout = ppo_loss(out[..., :P], a, lp, A, self.n_x, clip, ent_coef)
+            if self.aux > 0:                      # + aux L_aux, as in BC (Agent.__init__)
+                dout = np.concatenate([dout, self.aux * aux_loss(out[..., P:], facts[idx])[1]],
+                                      -1)
             vl, dv, _ = value_loss(critic.forward(f), returns[idx])  # 0.5 mean (V - R)^2
             # the loss returns (L, dL/dout) only, as exercise 4 asks: the logged figures come
             # from the distribution again (a few element-wise operations)
-            stats = (*ppo_stats(self.action_dist(out, self.n_x), a, lp, A, clip), vl)
+            stats = (*ppo_stats(self.action_dist(out[..., :P], self.n_x), a, lp, A, clip), vl)
             # backprop; the critic's loss is weighted by c_v:  d(c_v 0.5 (V - R)^2)/dout
             return (pl, vl, actor.backward(dout), critic.backward(vf_coef * dv),
                     np.array(stats))

@@ -47,7 +47,7 @@ CHOICES = {"select": ("ours", "end2new", "init2new"), "baseline": ("direct-ppo",
            "network": tuple(NETWORKS), "features": FEATURES, "action": ("drop", "place"),
            "parts_in": ("all", "bc"), "greedy": GREEDY}
 MIN_ZERO = {"seed", "rounds", "warmup", "max_stay", "eval_salt", "stretch", "ent_coef", "p_add",
-            "goal_parts", "base_pairs", "clear_pairs",
+            "goal_parts", "base_pairs", "clear_pairs", "aux_relations",
             "label_tasks", "label_top", "label_pair"}
 AT_MOST_ONE = {"gamma", "gae_lambda", "clip", "p_add", "clear_pairs"}
 SCALED = ("base_demos", "base_pairs", "ppo_steps", "expand_episodes", "eval_episodes",

@@ -79,13 +79,17 @@ def save_json(path, obj):
 
 def header(agent):
     """What load_agent needs to rebuild `agent`: its sizes, dtype, network, features and the
-    world's geometry that the features assume."""
-    return {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
-            "sizes": np.array([agent.n_blocks, agent.n_x, agent.n_y, agent.hidden], dtype=np.int64),
-            "dtype": np.array(agent.dtype.name),
-            "network": np.array(agent.network),
-            "features": np.array(agent.feature_set),
-            "geometry": np.array(list(GEOMETRY.values()), dtype=np.float64)}
+    world's geometry that the features assume, and, if it has one, its auxiliary loss's weight
+    (written only then, so that the files of agents without one keep their bytes)."""
+    out = {"format_version": np.array(FORMAT_VERSION, dtype=np.int64),
+           "sizes": np.array([agent.n_blocks, agent.n_x, agent.n_y, agent.hidden], dtype=np.int64),
+           "dtype": np.array(agent.dtype.name),
+           "network": np.array(agent.network),
+           "features": np.array(agent.feature_set),
+           "geometry": np.array(list(GEOMETRY.values()), dtype=np.float64)}
+    if agent.aux > 0:
+        out["aux"] = np.array(agent.aux, dtype=np.float64)
+    return out
 
 
 def save_agent(agent, path, extra=None):
@@ -94,8 +98,8 @@ def save_agent(agent, path, extra=None):
 
 
 def _check_header(data, path):
-    """The header of checkpoint `data` (read from `path`) -> (sizes, dtype, network, features),
-    or ValueError naming the file and the mismatch."""
+    """The header of checkpoint `data` (read from `path`) -> (sizes, dtype, network, features,
+    aux), or ValueError naming the file and the mismatch."""
     if "format_version" not in data or "sizes" not in data:
         raise ValueError(f"{path}: not an agent checkpoint (no format_version and sizes)")
     version, sizes = data["format_version"], data["sizes"]
@@ -119,7 +123,10 @@ def _check_header(data, path):
     features = str(data.get("features", ""))
     if features not in FEATURES:
         raise ValueError(f"{path}: features {features!r}, expected one of {FEATURES}")
-    return [int(k) for k in sizes], dtype, network, features
+    aux = data.get("aux", np.array(0.0))                # absent: made without an auxiliary loss
+    if aux.shape != () or aux.dtype.kind != "f" or not aux > 0 and "aux" in data:
+        raise ValueError(f"{path}: aux {aux}, expected the auxiliary loss's weight, above 0")
+    return [int(k) for k in sizes], dtype, network, features, float(aux)
 
 
 def load_agent(cls, path, extra=()):
@@ -131,8 +138,8 @@ def load_agent(cls, path, extra=()):
     if "state_version" in data and "state_version" not in extra:
         raise ValueError(f"{path}: a run's resume state, not an agent checkpoint; load one of "
                          "the run's round{k}.npz files")
-    sizes, dtype, network, features = _check_header(data, path)
-    agent = cls(*sizes, dtype=dtype, network=network, features=features)
+    sizes, dtype, network, features, aux = _check_header(data, path)
+    agent = cls(*sizes, dtype=dtype, network=network, features=features, aux=aux)
     params, extra = agent.state_dict(), set(extra)
     missing = extra - set(data)
     if missing:

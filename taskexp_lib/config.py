@@ -33,6 +33,11 @@ class Config:
     relations+leave (plus, for a block in the way, a code of the spot it must leave) |
     relations+leave+stay (plus, for a block that stands under a goal not met yet, that it is a
     support in place)"""
+    aux_relations: float = 0.0
+    """sec 3, not in the paper: with plain features, the weight of an auxiliary loss by which BC
+    and PPO also train the actor's tokens to predict each block's stacking relations
+    (features.AUX_FACTS: what hand-computed relations features would give); 0 = off. Training on
+    the policy's loss alone takes them out of the tokens (lab/bench/probe.py)"""
     action: str = "drop"
     """sec 3: drop (pick a block and an x; it falls onto whatever lies there, so physics finds
     its height) | place (pick a layer too: a layer the demos never showed is never chosen)"""
@@ -190,6 +195,7 @@ ADDED = {"other_orders": False,                                # 2026-12-04
          "goal_parts": 0, "base_pairs": 0,                       # 2026-12-06
          "clear_pairs": 0.0, "parts_in": "all",                  # 2026-12-07
          "distill_epochs": SameAs("bc_epochs"),                  # 2026-12-07
+         "aux_relations": 0.0,                                   # 2026-12-08
          # evaluation only: a run made before learns the same, and is tried on them from its
          # next round on
          "families": ("blocked", "air"),

@@ -7,6 +7,9 @@ comparing blocks (self-attention does). "relations+leave": plus, for a block in 
 of the spot it must leave (issue 53's lever L). "relations+leave+stay": plus, for a block that
 already stands under a goal not met yet, that it is a support in place (lever S). The world's
 geometry comes from geometry.py.
+
+relation_targets gives the same relations as targets instead (AUX_FACTS): with
+Config.aux_relations the actor learns to predict them from any features (agent.aux_loss).
 """
 import numpy as np
 
@@ -157,6 +160,27 @@ def relations(x, y, gx, gy, g, at_goal):
     # (B, i, j): block i stands in the column under j's goal spot, below it
     column = near(gx, x, w / 2) & (y[:, :, None] < gy[:, None, :] - h / 2)
     out["support_in_place"] = any_j(pending[:, None, :] * column) * (1.0 - out["in_the_way"])
+    return out
+
+
+# The facts that an auxiliary loss (Config.aux_relations) asks each actor token for, with plain
+# features: the RELATIONS that say what must move first and what must stay, as the hand-computed
+# features would give them, but learnt, so that the network still sees only the blocks and goals.
+AUX_FACTS = ("blocked", "held", "wait", "first", "covered", "in_the_way", "needs_support",
+             "support_in_place")
+
+
+def relation_targets(obs, chunk=4096):
+    """obs (B, n, 6) -> (B, n, len(AUX_FACTS)) float32 in {0, 1}: the facts of AUX_FACTS for
+    every block (relations), in chunks of `chunk` scenes to bound the (chunk, n, n) pair arrays."""
+    obs = np.asarray(obs, dtype=np.float64)
+    out = np.zeros((*obs.shape[:2], len(AUX_FACTS)), dtype=np.float32)
+    for i in range(0, len(obs), chunk):
+        x, y, gx, gy, g = (obs[i:i + chunk, :, j] for j in (0, 1, 3, 4, 5))
+        g = (g > 0.5).astype(np.float64)
+        at_goal = g * (np.hypot(gx - x, gy - y) < THRESHOLD)
+        facts = relations(x, y, gx, gy, g, at_goal)
+        out[i:i + chunk] = np.stack([facts[name] for name in AUX_FACTS], -1)
     return out
 
 

@@ -7,6 +7,7 @@ from agent import (
     ActionDist,
     Agent,
     OtherWorldWarning,
+    aux_loss,
     bc_loss,
     entropy_of,
     gae,
@@ -16,7 +17,14 @@ from agent import (
     value_loss,
 )
 from course.grader import numerical_grad  # central differences, step 1e-6
-from taskexp_lib.features import RELATIONS, feature_columns, featurize, relations
+from taskexp_lib.features import (
+    AUX_FACTS,
+    RELATIONS,
+    feature_columns,
+    featurize,
+    relation_targets,
+    relations,
+)
 from taskexp_lib.geometry import GEOMETRY
 from taskexp_lib.nets import SetNet
 from taskexp_lib.nn import MLP, Adam, clip_grad_norm
@@ -159,6 +167,76 @@ def test_agent_bc_gradient_through_features_and_setnet():
     grads = agent.actor.backward(bc_loss(agent.actor.forward(f), acts, 9)[1])
     for k in ("phi.W0", "rho.W1", "rho.b0"):
         assert rel_err(grads[k], numerical_grad(loss, agent.actor.params[k])) < TOL, k
+
+
+def test_aux_loss_backward_and_its_minimum():
+    rng = np.random.default_rng(16)
+    out, facts = 3 * rng.standard_normal((5, 4, 8)), rng.integers(0, 2, (5, 4, 8))
+    L, dout = aux_loss(out, facts)
+    assert rel_err(dout, numerical_grad(lambda: aux_loss(out, facts)[0], out)) < TOL
+    assert np.isclose(L, np.mean(-facts * np.log(1 / (1 + np.exp(-out)))
+                                 - (1 - facts) * np.log(1 - 1 / (1 + np.exp(-out)))))
+    sure = np.where(facts > 0, 40.0, -40.0)        # logits that say every fact, far past sure
+    assert aux_loss(sure, facts)[0] < 1e-15 and np.isfinite(aux_loss(1e4 * out, facts)[0])
+
+
+def test_the_auxiliary_facts_train_the_head_and_not_the_policy(tmp_path):
+    """With aux > 0 the actor's head has one output per fact after the policy's, which BC trains
+    (gradient through the whole network, against finite differences), which the policy never
+    reads, and which a checkpoint keeps."""
+    rng = np.random.default_rng(17)
+    agent = Agent(n_blocks=4, n_x=9, n_y=1, hidden=8, seed=1, dtype="float64", aux=0.7)
+    assert agent.actor.forward(agent.features(random_obs(rng, 1, n=4))).shape[-1] == 11 + 8
+    obs = random_obs(rng, 5, n=4, goals=2)
+    acts = np.stack([rng.integers(4, size=5), rng.integers(9, size=5), np.zeros(5, int)], 1)
+    f, facts = agent.features(obs), relation_targets(obs)
+    loss_fn = agent._with_aux(lambda out, a: bc_loss(out, a, 9))
+    loss = lambda: loss_fn(agent.actor.forward(f), (acts, facts))[0]
+    L, dout = loss_fn(agent.actor.forward(f), (acts, facts))
+    assert np.isclose(L, bc_loss(agent.actor.forward(f)[..., :11], acts, 9)[0]
+                      + 0.7 * aux_loss(agent.actor.forward(f)[..., 11:], facts)[0])
+    grads = agent.actor.backward(dout)
+    for k in ("embed.W0", "block1.attn.Wq", "head.W1", "head.b1"):
+        assert rel_err(grads[k], numerical_grad(loss, agent.actor.params[k])) < TOL, k
+    # the fact columns change nothing the policy does
+    before = agent.policy(f).log_prob(acts)
+    agent.actor.params["head.b1"][11:] += 5.0
+    assert np.array_equal(agent.policy(f).log_prob(acts), before)
+    # BC learns the facts: the auxiliary loss falls well below its start
+    obs = random_obs(rng, 256, n=4, goals=2)
+    acts = agent.act(obs, rng=rng)
+    start = aux_loss(agent.actor.forward(agent.features(obs))[..., 11:], relation_targets(obs))[0]
+    agent.bc(obs, acts, 20, 32, 3e-3, rng)
+    end = aux_loss(agent.actor.forward(agent.features(obs))[..., 11:], relation_targets(obs))[0]
+    assert end < start / 3
+    # and so does PPO, with no advantage to follow
+    fresh = Agent(n_blocks=4, n_x=9, n_y=1, hidden=8, seed=2, dtype="float64", aux=0.7)
+    fresh.ppo_update(obs, acts, fresh.policy(fresh.features(obs)).log_prob(acts), np.zeros(256),
+                     np.zeros(256), epochs=20, minibatch=32, clip=0.2, ent_coef=0.0, vf_coef=0.5,
+                     lr=3e-3, max_grad_norm=0.5, rng=rng)
+    assert aux_loss(fresh.actor.forward(fresh.features(obs))[..., 11:],
+                    relation_targets(obs))[0] < start / 3
+    agent.save(tmp_path / "aux.npz")
+    again = Agent.load(tmp_path / "aux.npz")
+    assert again.aux == 0.7 and np.array_equal(again.actor.forward(f), agent.actor.forward(f))
+    Agent(n_blocks=4, n_x=9, n_y=1, hidden=8).save(tmp_path / "none.npz")
+    assert "aux" not in np.load(tmp_path / "none.npz")        # the default's files as before
+    np.savez(tmp_path / "bad.npz", **{**np.load(tmp_path / "aux.npz"), "aux": np.array(-1.0)})
+    with pytest.raises(ValueError, match="bad.npz: aux -1.0"):
+        Agent.load(tmp_path / "bad.npz")
+    with pytest.raises(ValueError, match="aux -1"):
+        Agent(aux=-1)
+
+
+def test_relation_targets_are_the_relations_in_chunks():
+    rng = np.random.default_rng(18)
+    obs = random_obs(rng, 7, goals=3)
+    x, y, gx, gy, g = (obs[..., j] for j in (0, 1, 3, 4, 5))
+    facts = relations(x, y, gx, gy, g, g * (np.hypot(gx - x, gy - y) < GEOMETRY["threshold"]))
+    want = np.stack([facts[name] for name in AUX_FACTS], -1)
+    assert np.array_equal(relation_targets(obs), want)
+    assert np.array_equal(relation_targets(obs, chunk=3), want)
+    assert want.any() and not want.all()
 
 
 # ----------------------------------------------------------------------------- GAE

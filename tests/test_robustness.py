@@ -55,6 +55,7 @@ def child(*argv):
     (["--resume", "--out", "/nonexistent/run"], "holds no readable run"),
     (["--gamma", "1.5"], "--gamma must be <= 1"),
     (["--ppo-lr", "0"], "--ppo-lr must be > 0"),
+    (["--aux-relations", "-1"], "--aux-relations must be >= 0"),
     (["--max-stay", "6"], "--max-stay must be below --blocks"),
     (["--shapes", "O"], "invalid choice"),
     (["--distill-epochs", "8", "0"], "--distill-epochs must be epochs >= 1"),
