@@ -356,6 +356,15 @@ def how_to_go_on(out):
             f"    python taskexp.py --resume --out {out}")
 
 
+def as_flags(setting):
+    """(flag, value) -> the words that set it on the command line: "--seed 3", "--shapes I Y",
+    and for a switch "--aux-critic" or "--no-restrict"."""
+    name, value = setting
+    if isinstance(value, bool):
+        return name if value else name.replace("--", "--no-", 1)
+    return f"{name} {' '.join(map(str, value)) if isinstance(value, tuple) else value}"
+
+
 def settings_note(cfg, out, resume, scale):
     """What a run's settings mean for its numbers, or None for the default's."""
     other = other_settings(cfg, scale)
@@ -368,8 +377,7 @@ def settings_note(cfg, out, resume, scale):
                 + ", ".join(f"{b} {other[b]}" for b in budgets) + "): its success rates are not "
                 "those of the default run")
     if other:
-        return "settings other than the default's: " + " ".join(
-            f"{k} {' '.join(map(str, v)) if isinstance(v, tuple) else v}" for k, v in other.items())
+        return "settings other than the default's: " + " ".join(map(as_flags, other.items()))
     return None
 
 
