@@ -252,7 +252,7 @@ class Agent:
     def __init__(self, n_blocks=Config.n_blocks, n_x=N_X, n_y=1, hidden=Config.hidden,
                  seed=Config.seed, mlp_backward=mlp_backward, dtype=Config.dtype,
                  action_dist=None, network=Config.network, features=Config.features,
-                 greedy=Config.greedy, aux=Config.aux_relations, aux_critic=Config.aux_critic):
+                 greedy=Config.greedy, aux=Config.aux_relations):
         self.n_blocks, self.n_x, self.hidden = int(n_blocks), int(n_x), int(hidden)
         self.n_y = int(n_y)
         if greedy not in GREEDY:
@@ -275,10 +275,8 @@ class Agent:
         n_aux = len(AUX_FACTS) if self.aux > 0 else 0
         self.actor = Net(F, hidden, self.n_policy + n_aux, seed=[seed, 0], out_scale=0.01,
                          mlp_backward=mlp_backward, dtype=self.dtype)
-        # the critic's: its value, then, with aux_critic too, the facts' logits
-        self.aux_critic = bool(aux_critic) and self.aux > 0
-        self.critic = Net(F, hidden, 1 + (n_aux if self.aux_critic else 0), seed=[seed, 1],
-                          mlp_backward=mlp_backward, dtype=self.dtype)
+        self.critic = Net(F, hidden, 1, seed=[seed, 1], mlp_backward=mlp_backward,
+                          dtype=self.dtype)
         self.actor_opt, self.critic_opt = Adam(self.actor.params), Adam(self.critic.params)
         self.rng = np.random.default_rng([seed, 2])     # only when a caller passes no Generator
         self.threads = 1        # threads for a minibatch's parts (shards.py): same results for any
@@ -356,18 +354,18 @@ class Agent:
         self._check_actions(actions)
         loss = lambda out, a: bc_loss(out, a, self.n_x, self.action_dist)
         if self.aux > 0:        # L_BC + aux L_aux: the targets are the actions and the facts
-            actions, loss = (actions, relation_targets(obs)), self._with_aux(loss, self.n_policy)
+            actions, loss = (actions, relation_targets(obs)), self._with_aux(loss)
         return self._fit("BC", self.actor, self.actor_opt, loss, obs, actions, epochs,
                          batch_size, lr, rng, max_grad_norm, bar=bar)
 
-    def _with_aux(self, head_loss, P):
-        """head_loss(out, a) -> (L, dL/dout, ...) on a head's first P columns (the policy's, or
-        the value)  ->  the loss of the whole head on targets (a, facts): L + aux L_aux(the fact
-        columns, facts) (aux_loss)."""
+    def _with_aux(self, policy_loss):
+        """policy_loss(out, a) -> (L, dL/dout) on the policy's columns  ->  the loss of the whole
+        head on targets (a, facts): L + aux L_aux(the fact columns, facts) (aux_loss)."""
+        P = self.n_policy
 
         def loss(out, targets):
             a, facts = targets
-            lp, dp = head_loss(out[..., :P], a)[:2]
+            lp, dp = policy_loss(out[..., :P], a)
             la, da = aux_loss(out[..., P:], facts)
             return lp + self.aux * la, np.concatenate([dp, self.aux * da], -1)
         return loss
@@ -377,10 +375,8 @@ class Agent:
 
         obs (N, n, 6), returns (N,).  -> list of the mean minibatch loss of each epoch.
         """
-        returns, loss = np.asarray(returns, np.float64), value_loss
-        if self.aux_critic:     # + aux L_aux on the critic's fact columns
-            returns, loss = (returns, relation_targets(obs)), self._with_aux(loss, 1)
-        return self._fit("value fit", self.critic, self.critic_opt, loss, obs, returns,
+        returns = np.asarray(returns, np.float64)
+        return self._fit("value fit", self.critic, self.critic_opt, value_loss, obs, returns,
                          epochs, batch_size, lr, rng, max_grad_norm, bar=bar)
 
     def fit_value_pairs(self, obs, returns, weight, epochs, batch_size, lr, rng,
@@ -390,15 +386,9 @@ class Agent:
         -> list of the mean minibatch loss of each epoch."""
         loss = lambda out, R: pair_value_loss(out, R, weight)
         both = lambda o: np.concatenate([o[:, 0], o[:, 1]])          # the states a, then b
-        returns = np.asarray(returns, np.float64)
-        if self.aux_critic:     # + aux L_aux, on the facts of the states a, then b
-            obs = np.asarray(obs, np.float64)
-            facts = relation_targets(obs.reshape(-1, *obs.shape[2:])).reshape(*obs.shape[:3], -1)
-            with_aux = self._with_aux(loss, 1)
-            returns = (returns, facts)
-            loss = lambda out, batch: with_aux(out, (batch[0], both(batch[1])))
-        return self._fit("pair value fit", self.critic, self.critic_opt, loss, obs, returns,
-                         epochs, batch_size, lr, rng, max_grad_norm, inputs=both, bar=bar)
+        return self._fit("pair value fit", self.critic, self.critic_opt, loss, obs,
+                         np.asarray(returns, np.float64), epochs, batch_size, lr, rng,
+                         max_grad_norm, inputs=both, bar=bar)
 
     def _fit(self, phase, net, opt, loss_fn, obs, targets, epochs, batch_size, lr, rng,
              max_grad_norm, inputs=lambda o: o, bar=None):
@@ -484,11 +474,7 @@ class Agent:
             if self.aux > 0:                      # + aux L_aux, as in BC (Agent.__init__)
                 dout = np.concatenate([dout, self.aux * aux_loss(out[..., P:], facts[idx])[1]],
                                       -1)
-            v_out = critic.forward(f)            # the value's column, then those of the facts
-            vl, dv, _ = value_loss(v_out[..., :1], returns[idx])     # 0.5 mean (V - R)^2
-            if self.aux_critic:     # + aux L_aux / c_v: the facts weigh aux after c_v below
-                dv = np.concatenate([dv, self.aux / vf_coef * aux_loss(v_out[..., 1:],
-                                                                        facts[idx])[1]], -1)
+            vl, dv, _ = value_loss(critic.forward(f), returns[idx])  # 0.5 mean (V - R)^2
             # the loss returns (L, dL/dout) only, as exercise 4 asks: the logged figures come
             # from the distribution again (a few element-wise operations)
             stats = (*ppo_stats(self.action_dist(out[..., :P], self.n_x), a, lp, A, clip), vl)

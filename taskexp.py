@@ -605,7 +605,7 @@ def make_agent(cfg, mlp_backward=mlp_backward):
     return Agent(cfg.n_blocks, n_x=N_X, n_y=1 if cfg.action == "drop" else cfg.n_blocks,
                  hidden=cfg.hidden, seed=cfg.seed, mlp_backward=mlp_backward, dtype=cfg.dtype,
                  network=cfg.network, features=cfg.features, greedy=cfg.greedy,
-                 aux=cfg.aux_relations, aux_critic=cfg.aux_critic)
+                 aux=cfg.aux_relations)
 
 
 def train(cfg, agent=None, run=None, rng=None, pieces=None, on_round=None, bar=silent, log=print,

@@ -358,7 +358,7 @@ def how_to_go_on(out):
 
 def as_flags(setting):
     """(flag, value) -> the words that set it on the command line: "--seed 3", "--shapes I Y",
-    and for a switch "--aux-critic" or "--no-restrict"."""
+    and a switch as "--name" or "--no-name" ("--no-restrict")."""
     name, value = setting
     if isinstance(value, bool):
         return name if value else name.replace("--", "--no-", 1)

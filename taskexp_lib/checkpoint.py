@@ -89,8 +89,6 @@ def header(agent):
            "geometry": np.array(list(GEOMETRY.values()), dtype=np.float64)}
     if agent.aux > 0:
         out["aux"] = np.array(agent.aux, dtype=np.float64)
-    if agent.aux_critic:
-        out["aux_critic"] = np.array(True)
     return out
 
 
@@ -128,10 +126,7 @@ def _check_header(data, path):
     aux = data.get("aux", np.array(0.0))                # absent: made without an auxiliary loss
     if aux.shape != () or aux.dtype.kind != "f" or not aux > 0 and "aux" in data:
         raise ValueError(f"{path}: aux {aux}, expected the auxiliary loss's weight, above 0")
-    aux_critic = data.get("aux_critic", np.array(False))
-    if aux_critic.shape != () or aux_critic.dtype != bool or aux_critic and not aux > 0:
-        raise ValueError(f"{path}: aux_critic {aux_critic}, expected True with an aux weight")
-    return [int(k) for k in sizes], dtype, network, features, float(aux), bool(aux_critic)
+    return [int(k) for k in sizes], dtype, network, features, float(aux)
 
 
 def load_agent(cls, path, extra=()):
@@ -143,9 +138,8 @@ def load_agent(cls, path, extra=()):
     if "state_version" in data and "state_version" not in extra:
         raise ValueError(f"{path}: a run's resume state, not an agent checkpoint; load one of "
                          "the run's round{k}.npz files")
-    sizes, dtype, network, features, aux, aux_critic = _check_header(data, path)
-    agent = cls(*sizes, dtype=dtype, network=network, features=features, aux=aux,
-                aux_critic=aux_critic)
+    sizes, dtype, network, features, aux = _check_header(data, path)
+    agent = cls(*sizes, dtype=dtype, network=network, features=features, aux=aux)
     params, extra = agent.state_dict(), set(extra)
     missing = extra - set(data)
     if missing:

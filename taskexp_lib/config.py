@@ -38,9 +38,6 @@ class Config:
     and PPO also train the actor's tokens to predict each block's stacking relations
     (features.AUX_FACTS: what hand-computed relations features would give); 0 = off. Training on
     the policy's loss alone takes them out of the tokens (lab/bench/probe.py)"""
-    aux_critic: bool = False
-    """aux_relations: the critic's tokens learn the facts too (in every value fit and PPO), so
-    that V(s, g) can tell a goal that one drop meets from one whose spot is taken or unheld"""
     action: str = "drop"
     """sec 3: drop (pick a block and an x; it falls onto whatever lies there, so physics finds
     its height) | place (pick a layer too: a layer the demos never showed is never chosen)"""
@@ -198,7 +195,7 @@ ADDED = {"other_orders": False,                                # 2026-12-04
          "goal_parts": 0, "base_pairs": 0,                       # 2026-12-06
          "clear_pairs": 0.0, "parts_in": "all",                  # 2026-12-07
          "distill_epochs": SameAs("bc_epochs"),                  # 2026-12-07
-         "aux_relations": 0.0, "aux_critic": False,              # 2026-12-08
+         "aux_relations": 0.0,                                   # 2026-12-08
          # evaluation only: a run made before learns the same, and is tried on them from its
          # next round on
          "families": ("blocked", "air"),
@@ -206,9 +203,9 @@ ADDED = {"other_orders": False,                                # 2026-12-04
          "greedy": "joint"}                                      # 2026-12-07, evaluation only
 # Fields removed since, each with the only value today's code can go on with: they served variants
 # whose findings are in lab/notes.md (hard_picks, label_later_*: measured at main f915fea;
-# distill_data: at ba5e9fb)
+# distill_data: at ba5e9fb; aux_critic: at 23fa0c7)
 REMOVED = {"hard_picks": False, "label_later_tasks": 0, "label_later_epochs": None,
-           "label_every_round": False, "distill_data": "buffer"}
+           "label_every_round": False, "distill_data": "buffer", "aux_critic": False}
 
 
 class RemovedSetting(ValueError):

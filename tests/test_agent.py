@@ -190,7 +190,7 @@ def test_the_auxiliary_facts_train_the_head_and_not_the_policy(tmp_path):
     obs = random_obs(rng, 5, n=4, goals=2)
     acts = np.stack([rng.integers(4, size=5), rng.integers(9, size=5), np.zeros(5, int)], 1)
     f, facts = agent.features(obs), relation_targets(obs)
-    loss_fn = agent._with_aux(lambda out, a: bc_loss(out, a, 9), 11)
+    loss_fn = agent._with_aux(lambda out, a: bc_loss(out, a, 9))
     loss = lambda: loss_fn(agent.actor.forward(f), (acts, facts))[0]
     L, dout = loss_fn(agent.actor.forward(f), (acts, facts))
     assert np.isclose(L, bc_loss(agent.actor.forward(f)[..., :11], acts, 9)[0]
@@ -226,39 +226,6 @@ def test_the_auxiliary_facts_train_the_head_and_not_the_policy(tmp_path):
         Agent.load(tmp_path / "bad.npz")
     with pytest.raises(ValueError, match="aux -1"):
         Agent(aux=-1)
-
-
-def test_the_critic_learns_the_facts_too_with_aux_critic(tmp_path):
-    """aux_critic: the critic's head has the value's column, then one per fact; the value fits
-    (alone and in pairs) and PPO train the facts too, and V reads the value's column alone."""
-    rng = np.random.default_rng(19)
-    agent = Agent(n_blocks=4, n_x=9, n_y=1, hidden=8, seed=1, dtype="float64", aux=0.7,
-                  aux_critic=True)
-    obs = random_obs(rng, 5, n=4, goals=2)
-    f, facts, R = agent.features(obs), relation_targets(obs), rng.random(5)
-    assert agent.critic.forward(f).shape[-1] == 1 + 8
-    loss_fn = agent._with_aux(value_loss, 1)
-    loss = lambda: loss_fn(agent.critic.forward(f), (R, facts))[0]
-    grads = agent.critic.backward(loss_fn(agent.critic.forward(f), (R, facts))[1])
-    for k in ("embed.W0", "head.W1", "head.b1"):
-        assert rel_err(grads[k], numerical_grad(loss, agent.critic.params[k])) < TOL, k
-    before = agent.value(obs)
-    agent.critic.params["head.b1"][1:] += 5.0
-    assert np.array_equal(agent.value(obs), before)
-    agent.critic.params["head.b1"][1:] -= 5.0
-    obs = random_obs(rng, 256, n=4, goals=2)
-    facts_loss = lambda: aux_loss(agent.critic.forward(agent.features(obs))[..., 1:],
-                                  relation_targets(obs))[0]
-    start = facts_loss()
-    agent.fit_value(obs, rng.random(256), 25, 32, 3e-3, rng)
-    middle = facts_loss()
-    agent.fit_value_pairs(obs.reshape(128, 2, 4, 6), rng.random((128, 2)), 1.0, 10, 16, 3e-3, rng)
-    assert middle < start / 2 and facts_loss() < middle
-    agent.save(tmp_path / "c.npz")
-    assert Agent.load(tmp_path / "c.npz").aux_critic
-    np.savez(tmp_path / "bad.npz", **{**np.load(tmp_path / "c.npz"), "aux_critic": np.array(1)})
-    with pytest.raises(ValueError, match="bad.npz: aux_critic 1"):
-        Agent.load(tmp_path / "bad.npz")
 
 
 def test_relation_targets_are_the_relations_in_chunks():

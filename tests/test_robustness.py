@@ -384,9 +384,8 @@ def test_memory_stays_flat_and_the_buffer_bounded(tmp_path):
 def test_the_settings_note_is_a_command_that_makes_the_same_settings():
     """A run says which of its settings are not the default's as flags (cli.settings_note), the
     switches among them as --name or --no-name: given back to the CLI, they make its Config."""
-    argv = ["--no-restrict", "--aux-relations", "0.5", "--aux-critic",
-            "--shapes", "I", "Y"]
+    argv = ["--no-restrict", "--aux-relations", "0.5", "--shapes", "I", "Y"]
     cfg = cli.parse_args(argv)[0]
     note = cli.settings_note(cfg, "out", resume=False, scale=1.0)
-    assert "--no-restrict" in note and "--aux-critic" in note and "True" not in note
+    assert "--no-restrict" in note and "False" not in note
     assert cli.parse_args(note.split(": ", 1)[1].split())[0] == cfg
