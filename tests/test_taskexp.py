@@ -12,6 +12,7 @@ from agent import Agent
 from env2d import BlockWorld
 from taskexp_lib import labels, shapes
 from taskexp_lib.checkpoint import load_npz
+from taskexp_lib.features import AUX_FACTS
 from taskexp_lib.geometry import BLOCK_H, is_success, layer, same_spot
 from taskexp_lib.rollout import Trajectory
 
@@ -225,6 +226,18 @@ def test_cli_network_features_and_action_reach_the_agent(tmp_path, flags, networ
     width = {"plain": 52, "relations": 79, "relations+leave": 100,
              "relations+leave+stay": 101}[features]
     assert agent.features(np.zeros((1, 6, 6))).shape[-1] == width
+
+
+def test_cli_aux_relations_reaches_the_agent_and_resumes(tmp_path):
+    """--aux-relations: the run's actor has a fact column per AUX_FACTS after the policy's, its
+    checkpoints keep the weight, and the run resumes with it."""
+    out, res = run_cli(tmp_path, "--aux-relations", "0.5")
+    agent = Agent.load(os.path.join(out, "round1.npz"))
+    assert agent.aux == 0.5 and res["config"]["aux_relations"] == 0.5
+    f = agent.features(np.zeros((1, 6, 6)))
+    assert agent.actor.forward(f).shape[-1] == agent.n_policy + len(AUX_FACTS)
+    cli.main(["--resume", "--out", out, "--rounds", "2"])
+    assert Agent.load(os.path.join(out, "round2.npz")).aux == 0.5
 
 
 def test_the_greedy_rule_reaches_the_evaluation(capsys):
