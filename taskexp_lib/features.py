@@ -176,11 +176,12 @@ def relation_targets(obs, chunk=4096):
     obs = np.asarray(obs, dtype=np.float64)
     out = np.zeros((*obs.shape[:2], len(AUX_FACTS)), dtype=np.float32)
     for i in range(0, len(obs), chunk):
-        x, y, gx, gy, g = (obs[i:i + chunk, :, j] for j in (0, 1, 3, 4, 5))
-        g = (g > 0.5).astype(np.float64)
-        at_goal = g * (np.hypot(gx - x, gy - y) < THRESHOLD)
-        facts = relations(x, y, gx, gy, g, at_goal)
-        out[i:i + chunk] = np.stack([facts[name] for name in AUX_FACTS], -1)
+        part = obs[i:i + chunk]
+        x, y, gx, gy = part[..., 0], part[..., 1], part[..., 3], part[..., 4]
+        g = (part[..., 5] > 0.5).astype(np.float64)
+        met = g * (np.hypot(gx - x, gy - y) < THRESHOLD)        # goals reached, as in featurize
+        known = relations(x, y, gx, gy, g, met)
+        out[i:i + chunk] = np.stack([known[name] for name in AUX_FACTS], -1)
     return out
 
 
