@@ -360,15 +360,18 @@ class Agent:
 
     def _with_aux(self, policy_loss):
         """policy_loss(out, a) -> (L, dL/dout) on the policy's columns  ->  the loss of the whole
-        head on targets (a, facts): L + aux L_aux(the fact columns, facts) (aux_loss)."""
-        P = self.n_policy
-
+        head on targets (a, facts) (_add_aux)."""
         def loss(out, targets):
             a, facts = targets
-            lp, dp = policy_loss(out[..., :P], a)
-            la, da = aux_loss(out[..., P:], facts)
-            return lp + self.aux * la, np.concatenate([dp, self.aux * da], -1)
+            return self._add_aux(out, facts, *policy_loss(out[..., :self.n_policy], a))
         return loss
+
+    def _add_aux(self, out, facts, loss, dout):
+        """The whole actor head's outputs `out`, the policy's loss and its gradient `dout` w.r.t.
+        the policy's columns -> (L + aux L_aux, the gradient w.r.t. every column): aux_loss on
+        the fact columns, which the policy never reads."""
+        la, da = aux_loss(out[..., self.n_policy:], facts)
+        return loss + self.aux * la, np.concatenate([dout, self.aux * da], -1)
 
     def fit_value(self, obs, returns, epochs, batch_size, lr, rng, max_grad_norm=None, bar=None):
         """Regress V(s, g) on returns (e.g. of demonstrations): L = mean 0.5 (V - R)^2.
@@ -471,9 +474,8 @@ class Agent:
             out = actor.forward(f)               # logits of pi(b, x, y), then those of the facts
             # r = exp(log pi - log pi_old);  L = -mean min(r A, clip(r, 1-eps, 1+eps) A) - c_ent H
             pl, dout = ppo_loss(out[..., :P], a, lp, A, self.n_x, clip, ent_coef)
-            if self.aux > 0:                      # + aux L_aux, as in BC (Agent.__init__)
-                dout = np.concatenate([dout, self.aux * aux_loss(out[..., P:], facts[idx])[1]],
-                                      -1)
+            if self.aux > 0:          # + aux L_aux, as in BC; pl, logged, stays the policy's
+                dout = self._add_aux(out, facts[idx], pl, dout)[1]
             vl, dv, _ = value_loss(critic.forward(f), returns[idx])  # 0.5 mean (V - R)^2
             # the loss returns (L, dL/dout) only, as exercise 4 asks: the logged figures come
             # from the distribution again (a few element-wise operations)

@@ -124,7 +124,7 @@ def _check_header(data, path):
     if features not in FEATURES:
         raise ValueError(f"{path}: features {features!r}, expected one of {FEATURES}")
     aux = data.get("aux", np.array(0.0))                # absent: made without an auxiliary loss
-    if aux.shape != () or aux.dtype.kind != "f" or not aux > 0 and "aux" in data:
+    if "aux" in data and (aux.shape != () or aux.dtype.kind != "f" or not aux > 0):
         raise ValueError(f"{path}: aux {aux}, expected the auxiliary loss's weight, above 0")
     return [int(k) for k in sizes], dtype, network, features, float(aux)
 

@@ -85,12 +85,9 @@ def featurize(obs, n_y, features):
         raise ValueError(f"obs must have shape (B, n, 6), got {obs.shape}")
     w, h = BLOCK_W, BLOCK_H
     half, mid = (TABLE_X[1] - TABLE_X[0]) / 2, (TABLE_X[1] + TABLE_X[0]) / 2
-    x, y, ang, gx, gy, g = (obs[..., j] for j in range(6))
-    g = (g > 0.5).astype(np.float64)
-    dist = np.hypot(gx - x, gy - y)
+    x, y, ang, gx, gy, g, at_goal = _poses(obs)
     centres = np.linspace(TABLE_X[0], TABLE_X[1], N_RBF)
     rbf = lambda v: np.exp(-0.5 * ((v[..., None] - centres) / (w / 4)) ** 2)
-    at_goal = g * (dist < THRESHOLD)
     cols = [(x - mid) / half, y / (n_y * h), np.cos(ang), np.sin(ang), g,
             g * (gx - mid) / half, g * gy / (n_y * h), g * (gx - x) / w, g * (gy - y) / h, at_goal]
     x_code = rbf(x)                             # where a block is; relations+leave reuses it
@@ -105,6 +102,14 @@ def featurize(obs, n_y, features):
         spots.append(rel["support_in_place"][..., None])
     return np.concatenate([*plain, np.stack([rel[name] for name in RELATIONS], -1), *spots],
                           axis=-1)
+
+
+def _poses(obs):
+    """obs (B, n, 6) -> x, y, angle, goal x, goal y, has_goal and at_goal (a goal met: its block's
+    centre nearer than THRESHOLD), each (B, n); has_goal and at_goal are 0 or 1."""
+    x, y, ang, gx, gy, g = (obs[..., j] for j in range(6))
+    g = (g > 0.5).astype(np.float64)
+    return x, y, ang, gx, gy, g, g * (np.hypot(gx - x, gy - y) < THRESHOLD)
 
 
 # Hand-computed stacking preconditions: what self-attention over blocks would have to learn.
@@ -176,10 +181,7 @@ def relation_targets(obs, chunk=4096):
     obs = np.asarray(obs, dtype=np.float64)
     out = np.zeros((*obs.shape[:2], len(AUX_FACTS)), dtype=np.float32)
     for i in range(0, len(obs), chunk):
-        part = obs[i:i + chunk]
-        x, y, gx, gy = part[..., 0], part[..., 1], part[..., 3], part[..., 4]
-        g = (part[..., 5] > 0.5).astype(np.float64)
-        met = g * (np.hypot(gx - x, gy - y) < THRESHOLD)        # goals reached, as in featurize
+        x, y, _, gx, gy, g, met = _poses(obs[i:i + chunk])       # as featurize reads them
         known = relations(x, y, gx, gy, g, met)
         out[i:i + chunk] = np.stack([known[name] for name in AUX_FACTS], -1)
     return out
